@@ -1,0 +1,116 @@
+#include "common/json_output.hpp"
+
+#include <cmath>
+
+namespace proxima::client {
+
+namespace {
+
+nlohmann::json point(const Vec3& p) { return nlohmann::json::array({p.x, p.y, p.z}); }
+
+// JSON has no infinity: "no such feature" is null.
+nlohmann::json distance_value(double d) {
+    return std::isfinite(d) ? nlohmann::json(d) : nlohmann::json(nullptr);
+}
+
+nlohmann::json pair_json(const std::vector<InputObject>& objects, const FeaturePair& p,
+                         bool with_distance) {
+    nlohmann::json j = {{"object", p.object},
+                        {"triangle", objects[p.object].file_triangle[p.triangle]},
+                        {"other", p.other},
+                        {"other_triangle", objects[p.other].file_triangle[p.other_triangle]}};
+    if (with_distance) {
+        j["distance"] = p.distance;
+    }
+    return j;
+}
+
+}  // namespace
+
+nlohmann::json stats_json(const QueryStats& s) {
+    return {{"culler", s.culler},
+            {"seconds",
+             {{"prepare", s.prepare_seconds},
+              {"broad_phase", s.broad_phase_seconds},
+              {"separation", s.separation_seconds},
+              {"self", s.self_seconds},
+              {"collisions", s.collision_seconds},
+              {"tolerance", s.tolerance_seconds},
+              {"total", s.total_seconds}}},
+            {"exact_tests", s.exact_tests},
+            {"brute_force_tests", s.brute_force_tests},
+            {"object_pairs_tested", s.object_pairs_tested},
+            {"pns_pairs", s.pns_pairs}};
+}
+
+nlohmann::json distance_json(const std::vector<InputObject>& objects, const QueryResult& result,
+                             const OutputOptions& options) {
+    nlohmann::json out;
+    auto& list = out["objects"] = nlohmann::json::array();
+    for (std::size_t i = 0; i < objects.size(); ++i) {
+        const auto& obj = objects[i];
+        nlohmann::json o = {{"name", obj.mesh.name},
+                            {"file", obj.file},
+                            {"triangles", obj.file_triangle.size()}};
+        if (obj.component >= 0) {
+            o["component"] = obj.component;
+        }
+        if (i < result.separation.size()) {
+            const auto& s = result.separation[i];
+            if (s.other == NO_OBJECT) {
+                o["separation"] = {{"distance", nullptr}, {"other", nullptr},
+                                   {"triangle", nullptr}, {"other_triangle", nullptr},
+                                   {"point", nullptr},    {"other_point", nullptr}};
+            } else {
+                const auto other = static_cast<std::size_t>(s.other);
+                o["separation"] = {{"distance", s.distance},
+                                   {"other", s.other},
+                                   {"triangle", obj.file_triangle[s.triangle]},
+                                   {"other_triangle", objects[other].file_triangle[s.other_triangle]},
+                                   {"point", point(s.point)},
+                                   {"other_point", point(s.other_point)}};
+            }
+        }
+        list.push_back(std::move(o));
+    }
+    if (options.self) {
+        auto& self = out["self"] = nlohmann::json::array();
+        for (std::size_t i = 0; i < result.self.size(); ++i) {
+            const auto& ids = objects[i].file_triangle;
+            for (std::size_t t = 0; t < result.self[i].size(); ++t) {
+                const auto& s = result.self[i][t];
+                nlohmann::json e = {{"object", i}, {"triangle", ids[t]}};
+                if (s.closest == NO_OBJECT) {
+                    e["closest"] = nullptr;
+                    e["distance"] = nullptr;
+                } else {
+                    e["closest"] = ids[static_cast<std::size_t>(s.closest)];
+                    e["distance"] = distance_value(s.distance);
+                }
+                self.push_back(std::move(e));
+            }
+        }
+    }
+    if (options.collisions) {
+        auto& c = out["collisions"] = nlohmann::json::array();
+        for (const auto& p : result.collisions) {
+            c.push_back(pair_json(objects, p, false));
+        }
+    }
+    if (options.tolerance) {
+        auto& c = out["tolerance"] = nlohmann::json::array();
+        for (const auto& p : result.tolerance) {
+            c.push_back(pair_json(objects, p, true));
+        }
+    }
+    if (options.pns) {
+        auto& c = out["pns"] = nlohmann::json::array();
+        for (const auto& p : result.pns) {
+            c.push_back(pair_json(objects, p, false));
+        }
+    }
+    out["stats"] = stats_json(result.stats);
+    return out;
+}
+
+}  // namespace proxima::client

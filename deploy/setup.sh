@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Set-up from nothing on Debian 12, as root: installs every Debian package the project needs,
+# then configures and builds with the `release` preset (or the preset named by PROXIMA_PRESET).
+# Idempotent (apt skips what is installed, CMake rebuilds only what changed), quiet, and loud on
+# failure: any failing step stops the script with its output and a non-zero exit.
+#
+#   bash deploy/setup.sh            # install + build
+#   bash deploy/setup.sh --deps     # install packages only
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+preset="${PROXIMA_PRESET:-release}"
+
+packages=(
+  build-essential cmake ninja-build pkg-config git ca-certificates
+  libeigen3-dev libtbb-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev libassimp-dev libgmp-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev libmetis-dev
+  libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev
+  libfcl-dev libbullet-dev
+  python3 python3-grpcio python3-numpy
+)
+
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+run_quiet() {
+  # Runs a command, keeping its output unless it fails.
+  local out
+  out="$(mktemp)"
+  if ! "$@" >"$out" 2>&1; then
+    cat "$out" >&2
+    rm -f "$out"
+    log "FAILED: $*"
+    exit 1
+  fi
+  rm -f "$out"
+}
+
+install_packages() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
+      missing+=("$p")
+    fi
+  done
+  if [ ${#missing[@]} -eq 0 ]; then
+    log "all ${#packages[@]} Debian packages present"
+    return
+  fi
+  if [ "$(id -u)" -ne 0 ]; then
+    log "missing packages (${missing[*]}) and not root: run this script as root"
+    exit 1
+  fi
+  log "installing ${#missing[@]} Debian packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  run_quiet apt-get update -q
+  run_quiet apt-get install -y -q --no-install-recommends "${missing[@]}"
+}
+
+build() {
+  cd "$here"
+  log "configuring (preset $preset)"
+  run_quiet cmake --preset "$preset"
+  log "building (preset $preset)"
+  # Two jobs per core would swap on big TUs; one per core keeps peak memory predictable.
+  if ! cmake --build --preset "$preset" -j "$(nproc)" >/tmp/proxima-build.log 2>&1; then
+    tail -n 80 /tmp/proxima-build.log >&2
+    log "FAILED: build (full log in /tmp/proxima-build.log)"
+    exit 1
+  fi
+  log "built into build/$preset"
+}
+
+install_packages
+if [ "${1:-}" != "--deps" ]; then
+  build
+fi

@@ -1,0 +1,44 @@
+#pragma once
+// Axis-aligned bounding-box hierarchy over the triangles of one object. Built top-down once per
+// topology; when only vertex positions change it is *refitted* bottom-up (same tree, new boxes),
+// which is O(n) and keeps every box conservative, so culling stays exact.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "proxima/geometry/vec3.hpp"
+#include "proxima/mesh/mesh.hpp"
+
+namespace proxima {
+
+class Bvh {
+public:
+    // Nodes are stored in depth-first pre-order: a node's left child is the next node and its
+    // right child is `right`; children always have larger indices than their parent, so a reverse
+    // sweep refits bottom-up. A leaf (count > 0) holds triangles order()[first, first + count).
+    struct Node {
+        Aabb box;
+        std::uint32_t first = 0;  // leaf: first slot in order(); inner: index of the right child
+        std::uint32_t count = 0;  // 0 for inner nodes
+        bool leaf() const { return count != 0; }
+    };
+    static constexpr std::uint32_t LEAF_SIZE = 4;
+
+    void build(std::span<const Vec3> vertices, const MeshTopology& topology);
+    void refit(std::span<const Vec3> vertices, const MeshTopology& topology);
+
+    bool empty() const { return m_nodes.empty(); }
+    const std::vector<Node>& nodes() const { return m_nodes; }
+    const std::vector<std::uint32_t>& order() const { return m_order; }
+    // Box of each triangle (by triangle index) at the last build/refit.
+    const std::vector<Aabb>& triangle_boxes() const { return m_tri_boxes; }
+
+private:
+    void compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology);
+    std::vector<Node> m_nodes;
+    std::vector<std::uint32_t> m_order;
+    std::vector<Aabb> m_tri_boxes;
+};
+
+}  // namespace proxima

@@ -1,0 +1,45 @@
+#pragma once
+// Stage I of seed 000 (§5.1): object boxes kept sorted along x across frames. Objects move
+// little between frames, so re-sorting the previous order with insertion sort costs O(n + swaps)
+// (temporal coherence). Range queries over the sorted intervals give the objects whose boxes come
+// within a radius of an object's box.
+
+#include <cstdint>
+#include <vector>
+
+#include "proxima/scene.hpp"
+
+namespace proxima {
+
+class SweepAndPrune {
+public:
+    // Re-sorts after the scene changed. Keeps the previous order for surviving objects.
+    void update(const Scene& scene);
+
+    // Scene indices j != i whose box may lie within `radius` of object i's box (box distance
+    // scaled by CULL_SAFETY <= radius), appended to `out` in increasing box distance.
+    void within(const Scene& scene, std::size_t i, double radius,
+                std::vector<std::size_t>& out) const;
+
+    // A conservative upper bound on the distance from object i to its closest other object, from
+    // the boxes alone (seed §5.1: the farthest corners of the box of a nearby object along the
+    // sorted axis); +inf when i is the only object.
+    double separation_upper_bound(const Scene& scene, std::size_t i) const;
+
+    // Number of element moves the last update's insertion sort made (coherence statistic).
+    std::uint64_t last_swaps() const { return m_swaps; }
+
+private:
+    std::vector<ObjectId> m_ids;         // sorted order of the previous frame, by id
+    std::vector<std::size_t> m_order;    // scene indices sorted by box.lo.x
+    std::vector<std::size_t> m_rank;     // scene index -> position in m_order
+    std::vector<double> m_lo;            // box.lo.x in m_order order
+    double m_max_extent = 0.0;           // largest box extent along x
+    std::uint64_t m_swaps = 0;
+};
+
+// Largest distance between a point of box a and a point of box b: an upper bound on the distance
+// between anything inside a and anything inside b.
+double box_max_distance(const Aabb& a, const Aabb& b);
+
+}  // namespace proxima

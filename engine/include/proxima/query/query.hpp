@@ -1,0 +1,141 @@
+#pragma once
+// Proximity queries on a scene: separation (closest other object per object), self (closest
+// non-adjacent triangle per triangle), collisions, tolerance and PNS. Every answer is exact: it is
+// what brute force over all (non-adjacent) triangle pairs gives, with the same exact primitives;
+// the culler only decides which pairs are tested.
+//
+// Conventions: objects are scene indices (order of Scene::objects()); triangles are indices in the
+// object's topology; distances are Euclidean, in scene units; two triangles are adjacent when they
+// share a vertex index, and adjacent pairs are excluded from intra-object queries.
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "proxima/culling/culler.hpp"
+#include "proxima/culling/sweep_and_prune.hpp"
+#include "proxima/scene.hpp"
+
+namespace proxima {
+
+// Lets a caller stop long work: cancellation or a deadline. Checked between work items, so a
+// query stops within one object or one chunk of triangles.
+class CancelToken {
+public:
+    void cancel() { m_cancelled.store(true, std::memory_order_relaxed); }
+    void set_deadline(std::chrono::steady_clock::time_point t) { m_deadline = t; }
+    bool cancelled() const { return m_cancelled.load(std::memory_order_relaxed); }
+    bool expired() const {
+        return m_deadline && std::chrono::steady_clock::now() >= *m_deadline;
+    }
+    bool should_stop() const { return cancelled() || expired(); }
+
+private:
+    std::atomic<bool> m_cancelled{false};
+    std::optional<std::chrono::steady_clock::time_point> m_deadline;
+};
+
+struct QueryRequest {
+    bool separation = true;
+    bool self = false;
+    bool collisions = false;
+    std::optional<double> tolerance;  // report pairs with distance <= tolerance (>= 0)
+    bool pns = false;                 // report the culler's candidates for the tolerance (or 0)
+    CullerKind culler = CullerKind::automatic;
+};
+
+inline constexpr std::int64_t NO_OBJECT = -1;
+
+struct Separation {
+    std::int64_t other = NO_OBJECT;  // scene index of the closest other object
+    std::uint32_t triangle = 0;        // in this object
+    std::uint32_t other_triangle = 0;  // in `other`
+    double distance = std::numeric_limits<double>::infinity();
+    Vec3 point;        // on this object
+    Vec3 other_point;  // on `other`
+};
+
+struct SelfDistance {
+    std::int64_t closest = NO_OBJECT;  // triangle of the same object, -1 when all are adjacent
+    double distance = std::numeric_limits<double>::infinity();
+    Vec3 point;
+    Vec3 other_point;
+};
+
+struct FeaturePair {
+    std::uint32_t object = 0;
+    std::uint32_t triangle = 0;
+    std::uint32_t other = 0;  // == object for intra-object pairs (then triangle < other_triangle)
+    std::uint32_t other_triangle = 0;
+    double distance = 0.0;  // for tolerance pairs; 0 for collisions and PNS
+    friend bool operator<(const FeaturePair& a, const FeaturePair& b) {
+        return std::tie(a.object, a.triangle, a.other, a.other_triangle) <
+               std::tie(b.object, b.triangle, b.other, b.other_triangle);
+    }
+};
+
+struct QueryStats {
+    std::string culler;  // which culler ran
+    // Wall-clock seconds per stage.
+    double prepare_seconds = 0;      // refit / rebuild of culling structures
+    double broad_phase_seconds = 0;  // Stage I: object boxes, sweep and prune
+    double separation_seconds = 0;
+    double self_seconds = 0;
+    double collision_seconds = 0;
+    double tolerance_seconds = 0;
+    double total_seconds = 0;
+    // Exact primitive tests performed (triangle-triangle distance or intersection).
+    std::uint64_t exact_tests = 0;
+    // Tests brute force would perform for the same queries (all object pairs, all non-adjacent
+    // triangle pairs): the denominator of the culling efficiency.
+    std::uint64_t brute_force_tests = 0;
+    std::uint64_t object_pairs_tested = 0;
+    std::uint64_t pns_pairs = 0;
+};
+
+struct QueryResult {
+    std::vector<Separation> separation;        // per object, when requested
+    std::vector<std::vector<SelfDistance>> self;  // per object, per triangle, when requested
+    std::vector<FeaturePair> collisions;       // sorted
+    std::vector<FeaturePair> tolerance;        // sorted, with distances
+    std::vector<FeaturePair> pns;              // sorted
+    QueryStats stats;
+};
+
+// Owns a scene and the culling state that persists between frames (refitted hierarchies, the
+// sorted intervals of Stage I), so a simulator's frames reuse work.
+class ProximityEngine {
+public:
+    ProximityEngine();
+    ~ProximityEngine();
+    ProximityEngine(const ProximityEngine&) = delete;
+    ProximityEngine& operator=(const ProximityEngine&) = delete;
+
+    Scene& scene() { return m_scene; }
+    const Scene& scene() const { return m_scene; }
+
+    // Runs the requested queries on the current scene. Fails with invalid_argument for a bad
+    // request (negative or non-finite tolerance), cancelled / deadline_exceeded when the token says
+    // so (partial results are discarded).
+    StatusOr<QueryResult> query(const QueryRequest& request, const CancelToken* cancel = nullptr);
+
+private:
+    Culler& culler_for(CullerKind kind);
+
+    Scene m_scene;
+    std::unique_ptr<Culler> m_brute;
+    std::unique_ptr<Culler> m_bvh;
+    SweepAndPrune m_sap;
+    std::uint64_t m_sap_generation = ~0ull;
+};
+
+// Number of unordered non-adjacent triangle pairs within one object (brute-force work of a
+// self-collision query).
+std::uint64_t non_adjacent_pair_count(const MeshTopology& topology);
+
+}  // namespace proxima

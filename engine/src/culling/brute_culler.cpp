@@ -1,0 +1,51 @@
+// The brute-force reference: every pair, no bounds consulted. Queries through it are the
+// definition of the right answer that every other culler is tested against.
+#include "culling/cullers.hpp"
+
+namespace proxima::detail {
+
+void BruteCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b,
+                                  double& bound_sq, PairVisitor visit) const {
+    const auto na = static_cast<std::uint32_t>(scene[a].triangle_count());
+    const auto nb = static_cast<std::uint32_t>(scene[b].triangle_count());
+    for (std::uint32_t ta = 0; ta < na; ++ta) {
+        for (std::uint32_t tb = 0; tb < nb; ++tb) {
+            visit(ta, tb);
+        }
+    }
+}
+
+void BruteCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t t,
+                                 double& bound_sq, PairVisitor visit) const {
+    const auto& topo = *scene[a].topology;
+    const auto n = static_cast<std::uint32_t>(topo.triangle_count());
+    for (std::uint32_t u = 0; u < n; ++u) {
+        if (!topo.adjacent(t, u)) {
+            visit(t, u);
+        }
+    }
+}
+
+void BruteCuller::pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
+                               std::vector<TrianglePair>& out) const {
+    const auto na = static_cast<std::uint32_t>(scene[a].triangle_count());
+    const auto nb = static_cast<std::uint32_t>(scene[b].triangle_count());
+    if (a != b) {
+        for (std::uint32_t ta = 0; ta < na; ++ta) {
+            for (std::uint32_t tb = 0; tb < nb; ++tb) {
+                out.emplace_back(ta, tb);
+            }
+        }
+        return;
+    }
+    const auto& topo = *scene[a].topology;
+    for (std::uint32_t ta = 0; ta < na; ++ta) {
+        for (std::uint32_t tb = ta + 1; tb < na; ++tb) {
+            if (!topo.adjacent(ta, tb)) {
+                out.emplace_back(ta, tb);
+            }
+        }
+    }
+}
+
+}  // namespace proxima::detail

@@ -1,0 +1,284 @@
+// BVH culler: one AABB hierarchy per object, refitted when only positions change. Pairs are
+// culled by box distance scaled by CULL_SAFETY, so rounding in the box arithmetic can never drop
+// a pair whose computed distance would be the answer.
+#include <algorithm>
+#include <unordered_map>
+
+#include <tbb/parallel_for.h>
+
+#include "culling/cullers.hpp"
+
+namespace proxima::detail {
+
+namespace {
+bool culled(double box_sq, double bound_sq) { return box_sq * CULL_SAFETY >= bound_sq; }
+bool outside_radius(double box_sq, double radius_sq) { return box_sq * CULL_SAFETY > radius_sq; }
+
+double node_size(const Bvh::Node& n) {
+    const Vec3 e = n.box.extent();
+    return e.x + e.y + e.z;
+}
+}  // namespace
+
+void BvhCuller::prepare(const Scene& scene) {
+    if (m_scene == &scene && m_generation == scene.generation()) {
+        return;
+    }
+    std::unordered_map<ObjectId, Entry> old;
+    old.reserve(m_entries.size());
+    for (auto& e : m_entries) {
+        old.emplace(e.id, std::move(e));
+    }
+    std::vector<Entry> next(scene.size());
+    std::vector<char> reuse(scene.size(), 0);
+    for (std::size_t i = 0; i < scene.size(); ++i) {
+        const auto& obj = scene[i];
+        auto it = old.find(obj.id);
+        if (it != old.end() && it->second.topology_version == obj.topology_version) {
+            next[i] = std::move(it->second);
+            reuse[i] = 1;
+        }
+        next[i].id = obj.id;
+        next[i].topology_version = obj.topology_version;
+    }
+    tbb::parallel_for(std::size_t{0}, scene.size(), [&](std::size_t i) {
+        const auto& obj = scene[i];
+        if (reuse[i] != 0) {
+            next[i].bvh.refit(obj.vertices, *obj.topology);
+        } else {
+            next[i].bvh.build(obj.vertices, *obj.topology);
+        }
+    });
+    m_entries = std::move(next);
+    m_scene = &scene;
+    m_generation = scene.generation();
+}
+
+void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b,
+                                double& bound_sq, PairVisitor visit) const {
+    const Bvh& ba = m_entries[a].bvh;
+    const Bvh& bb = m_entries[b].bvh;
+    const auto& na = ba.nodes();
+    const auto& nb = bb.nodes();
+    const auto& boxes_a = ba.triangle_boxes();
+    const auto& boxes_b = bb.triangle_boxes();
+    struct Item {
+        std::uint32_t i, j;
+        double d;
+    };
+    std::vector<Item> stack;
+    stack.reserve(64);
+    const double d0 = box_squared_distance(na[0].box, nb[0].box);
+    if (culled(d0, bound_sq)) {
+        return;
+    }
+    stack.push_back({0, 0, d0});
+    while (!stack.empty()) {
+        const Item it = stack.back();
+        stack.pop_back();
+        if (culled(it.d, bound_sq)) {
+            continue;
+        }
+        const auto& x = na[it.i];
+        const auto& y = nb[it.j];
+        if (x.leaf() && y.leaf()) {
+            for (auto p = x.first; p < x.first + x.count; ++p) {
+                const auto ta = ba.order()[p];
+                if (culled(box_squared_distance(boxes_a[ta], y.box), bound_sq)) {
+                    continue;
+                }
+                for (auto q = y.first; q < y.first + y.count; ++q) {
+                    const auto tb = bb.order()[q];
+                    if (!culled(box_squared_distance(boxes_a[ta], boxes_b[tb]), bound_sq)) {
+                        visit(ta, tb);
+                    }
+                }
+            }
+            continue;
+        }
+        // Descend the larger node (or the only inner one); visit the nearer child first by
+        // pushing it last.
+        const bool split_a = !x.leaf() && (y.leaf() || node_size(x) >= node_size(y));
+        Item c1, c2;
+        if (split_a) {
+            c1 = {it.i + 1, it.j, box_squared_distance(na[it.i + 1].box, y.box)};
+            c2 = {x.first, it.j, box_squared_distance(na[x.first].box, y.box)};
+        } else {
+            c1 = {it.i, it.j + 1, box_squared_distance(x.box, nb[it.j + 1].box)};
+            c2 = {it.i, y.first, box_squared_distance(x.box, nb[y.first].box)};
+        }
+        if (c1.d > c2.d) {
+            std::swap(c1, c2);
+        }
+        if (!culled(c2.d, bound_sq)) {
+            stack.push_back(c2);
+        }
+        if (!culled(c1.d, bound_sq)) {
+            stack.push_back(c1);
+        }
+    }
+}
+
+void BvhCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t t,
+                               double& bound_sq, PairVisitor visit) const {
+    const Bvh& bvh = m_entries[a].bvh;
+    const auto& nodes = bvh.nodes();
+    const auto& boxes = bvh.triangle_boxes();
+    const auto& tris = scene[a].topology->triangles();
+    const Aabb query = boxes[t];
+    const TriangleIndices& tt = tris[t];
+    struct Item {
+        std::uint32_t i;
+        double d;
+    };
+    Item stack[128];
+    int top = 0;
+    stack[top++] = {0, box_squared_distance(query, nodes[0].box)};
+    while (top > 0) {
+        const Item it = stack[--top];
+        if (culled(it.d, bound_sq)) {
+            continue;
+        }
+        const auto& n = nodes[it.i];
+        if (n.leaf()) {
+            for (auto p = n.first; p < n.first + n.count; ++p) {
+                const auto u = bvh.order()[p];
+                if (u == t || share_vertex(tt, tris[u])) {
+                    continue;
+                }
+                if (!culled(box_squared_distance(query, boxes[u]), bound_sq)) {
+                    visit(t, u);
+                }
+            }
+            continue;
+        }
+        Item c1{it.i + 1, box_squared_distance(query, nodes[it.i + 1].box)};
+        Item c2{n.first, box_squared_distance(query, nodes[n.first].box)};
+        if (c1.d > c2.d) {
+            std::swap(c1, c2);
+        }
+        // Depth is bounded by the median-split build (log2 of the triangle count), far below 64.
+        if (!culled(c2.d, bound_sq)) {
+            stack[top++] = c2;
+        }
+        if (!culled(c1.d, bound_sq)) {
+            stack[top++] = c1;
+        }
+    }
+}
+
+namespace {
+
+// Collects leaf-level candidate pairs of a dual traversal with a fixed radius. `same` is true when
+// both trees are the same object's (self pairs: ta < tb, non-adjacent only).
+struct RadiusTraversal {
+    const Bvh& ba;
+    const Bvh& bb;
+    const std::vector<TriangleIndices>* tris;  // set when same
+    bool same;
+    double radius_sq;
+
+    void emit(std::uint32_t ta, std::uint32_t tb, std::vector<TrianglePair>& out) const {
+        if (same) {
+            if (ta == tb || share_vertex((*tris)[ta], (*tris)[tb])) {
+                return;
+            }
+            if (ta > tb) {
+                std::swap(ta, tb);
+            }
+        }
+        if (!outside_radius(box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]),
+                            radius_sq)) {
+            out.emplace_back(ta, tb);
+        }
+    }
+
+    // Expands node pair (i, j) one level; leaf pairs are emitted, child pairs pushed to `next`.
+    void step(std::uint32_t i, std::uint32_t j, std::vector<std::pair<std::uint32_t, std::uint32_t>>& next,
+              std::vector<TrianglePair>& out) const {
+        const auto& x = ba.nodes()[i];
+        const auto& y = bb.nodes()[j];
+        if (same && i == j) {
+            if (x.leaf()) {
+                for (auto p = x.first; p < x.first + x.count; ++p) {
+                    for (auto q = p + 1; q < x.first + x.count; ++q) {
+                        emit(ba.order()[p], ba.order()[q], out);
+                    }
+                }
+                return;
+            }
+            next.emplace_back(i + 1, i + 1);
+            next.emplace_back(x.first, x.first);
+            push_if_near(i + 1, x.first, next);
+            return;
+        }
+        if (x.leaf() && y.leaf()) {
+            for (auto p = x.first; p < x.first + x.count; ++p) {
+                for (auto q = y.first; q < y.first + y.count; ++q) {
+                    emit(ba.order()[p], bb.order()[q], out);
+                }
+            }
+            return;
+        }
+        const bool split_a = !x.leaf() && (y.leaf() || node_size(x) >= node_size(y));
+        if (split_a) {
+            push_if_near(i + 1, j, next);
+            push_if_near(x.first, j, next);
+        } else {
+            push_if_near(i, j + 1, next);
+            push_if_near(i, y.first, next);
+        }
+    }
+
+    void push_if_near(std::uint32_t i, std::uint32_t j,
+                      std::vector<std::pair<std::uint32_t, std::uint32_t>>& next) const {
+        if (!outside_radius(box_squared_distance(ba.nodes()[i].box, bb.nodes()[j].box), radius_sq)) {
+            next.emplace_back(i, j);
+        }
+    }
+
+    void run(std::uint32_t i, std::uint32_t j, std::vector<TrianglePair>& out) const {
+        std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{i, j}};
+        while (!stack.empty()) {
+            const auto [x, y] = stack.back();
+            stack.pop_back();
+            step(x, y, stack, out);
+        }
+    }
+};
+
+}  // namespace
+
+void BvhCuller::pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
+                             std::vector<TrianglePair>& out) const {
+    const Bvh& ba = m_entries[a].bvh;
+    const Bvh& bb = m_entries[b].bvh;
+    RadiusTraversal tr{ba, bb, &scene[a].topology->triangles(), a == b, radius * radius};
+    if (a != b && outside_radius(box_squared_distance(ba.nodes()[0].box, bb.nodes()[0].box),
+                                 tr.radius_sq)) {
+        return;
+    }
+    // Expand breadth-first into enough independent node pairs to keep every core busy, then
+    // finish each subtree pair in parallel.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> frontier{{0, 0}};
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> next;
+    while (!frontier.empty() && frontier.size() < 256) {
+        next.clear();
+        for (auto [i, j] : frontier) {
+            tr.step(i, j, next, out);
+        }
+        frontier.swap(next);
+    }
+    if (frontier.empty()) {
+        return;
+    }
+    std::vector<std::vector<TrianglePair>> parts(frontier.size());
+    tbb::parallel_for(std::size_t{0}, frontier.size(), [&](std::size_t k) {
+        tr.run(frontier[k].first, frontier[k].second, parts[k]);
+    });
+    for (auto& p : parts) {
+        out.insert(out.end(), p.begin(), p.end());
+    }
+}
+
+}  // namespace proxima::detail

@@ -1,0 +1,280 @@
+// Property tests: on random scenes (closed and open, touching, crossing, nested, degenerate),
+// every query through the BVH culler equals brute force, and brute force through the query code
+// equals a naive loop written here independently of it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "proxima/distance/primitives.hpp"
+#include "proxima/query/query.hpp"
+#include "support/random_scenes.hpp"
+
+namespace proxima {
+namespace {
+
+using test::Rng;
+
+constexpr double REL = 1e-12;
+
+bool same_distance(double a, double b) {
+    if (std::isinf(a) || std::isinf(b)) {
+        return a == b;
+    }
+    return std::abs(a - b) <= REL * std::max(1.0, std::max(std::abs(a), std::abs(b)));
+}
+
+Triangle corners(const SceneObject& o, std::uint32_t t) {
+    const auto& i = o.triangle(t);
+    return {o.vertices[i[0]], o.vertices[i[1]], o.vertices[i[2]]};
+}
+
+// Naive references, independent of cullers and of the query code.
+double naive_object_distance(const SceneObject& a, const SceneObject& b) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t i = 0; i < a.triangle_count(); ++i) {
+        for (std::uint32_t j = 0; j < b.triangle_count(); ++j) {
+            best = std::min(best, triangle_triangle(corners(a, i), corners(b, j)).squared_distance);
+        }
+    }
+    return std::sqrt(best);
+}
+
+double naive_self_distance(const SceneObject& a, std::uint32_t t) {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t u = 0; u < a.triangle_count(); ++u) {
+        if (!a.topology->adjacent(t, u)) {
+            best = std::min(best, triangle_triangle(corners(a, t), corners(a, u)).squared_distance);
+        }
+    }
+    return std::sqrt(best);
+}
+
+std::vector<FeaturePair> naive_pairs(const Scene& s, double radius, bool intersect) {
+    std::vector<FeaturePair> out;
+    for (std::uint32_t i = 0; i < s.size(); ++i) {
+        for (std::uint32_t j = i; j < s.size(); ++j) {
+            for (std::uint32_t ta = 0; ta < s[i].triangle_count(); ++ta) {
+                for (std::uint32_t tb = (i == j ? ta + 1 : 0); tb < s[j].triangle_count(); ++tb) {
+                    if (i == j && s[i].topology->adjacent(ta, tb)) {
+                        continue;
+                    }
+                    const Triangle x = corners(s[i], ta);
+                    const Triangle y = corners(s[j], tb);
+                    if (intersect ? triangles_intersect(x, y)
+                                  : triangle_triangle(x, y).squared_distance <= radius * radius) {
+                        out.push_back({i, ta, j, tb, 0.0});
+                    }
+                }
+            }
+        }
+    }
+    return out;
+}
+
+bool same_pairs(std::vector<FeaturePair> a, std::vector<FeaturePair> b) {
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    if (a.size() != b.size()) {
+        return false;
+    }
+    for (std::size_t k = 0; k < a.size(); ++k) {
+        if (a[k] < b[k] || b[k] < a[k]) {
+            return false;
+        }
+    }
+    return true;
+}
+
+QueryRequest full_request(CullerKind culler, double tolerance) {
+    QueryRequest r;
+    r.separation = true;
+    r.self = true;
+    r.collisions = true;
+    r.tolerance = tolerance;
+    r.pns = true;
+    r.culler = culler;
+    return r;
+}
+
+// Checks the BVH answer against the brute-force answer for the same scene state.
+void expect_equal_answers(const Scene& scene, const QueryResult& bvh, const QueryResult& brute,
+                          const std::string& where) {
+    ASSERT_EQ(bvh.separation.size(), brute.separation.size()) << where;
+    for (std::size_t i = 0; i < scene.size(); ++i) {
+        const auto& x = bvh.separation[i];
+        const auto& y = brute.separation[i];
+        EXPECT_TRUE(same_distance(x.distance, y.distance))
+            << where << " object " << i << ": bvh " << x.distance << " brute " << y.distance;
+        if (x.other != NO_OBJECT) {
+            // The reported pair realizes the reported distance (ties may pick another pair).
+            const auto j = static_cast<std::size_t>(x.other);
+            ASSERT_NE(j, i) << where;
+            const auto cp = triangle_triangle(corners(scene[i], x.triangle),
+                                              corners(scene[j], x.other_triangle));
+            EXPECT_TRUE(same_distance(std::sqrt(cp.squared_distance), x.distance)) << where;
+            EXPECT_TRUE(same_distance(norm(x.point - x.other_point), x.distance)) << where;
+        }
+    }
+    ASSERT_EQ(bvh.self.size(), brute.self.size()) << where;
+    for (std::size_t i = 0; i < scene.size(); ++i) {
+        for (std::size_t t = 0; t < bvh.self[i].size(); ++t) {
+            const auto& x = bvh.self[i][t];
+            const auto& y = brute.self[i][t];
+            ASSERT_TRUE(same_distance(x.distance, y.distance))
+                << where << " object " << i << " triangle " << t << ": bvh " << x.distance
+                << " brute " << y.distance;
+            if (x.closest != NO_OBJECT) {
+                EXPECT_FALSE(scene[i].topology->adjacent(static_cast<std::uint32_t>(t),
+                                                         static_cast<std::uint32_t>(x.closest)))
+                    << where;
+            }
+        }
+    }
+    EXPECT_TRUE(same_pairs(bvh.collisions, brute.collisions))
+        << where << ": " << bvh.collisions.size() << " vs " << brute.collisions.size();
+    EXPECT_TRUE(same_pairs(bvh.tolerance, brute.tolerance))
+        << where << ": " << bvh.tolerance.size() << " vs " << brute.tolerance.size();
+    // The BVH's candidates must contain every pair brute force finds within the bound.
+    for (const auto& p : brute.tolerance) {
+        EXPECT_TRUE(std::binary_search(bvh.pns.begin(), bvh.pns.end(), p)) << where;
+    }
+    EXPECT_LE(bvh.stats.exact_tests, brute.stats.exact_tests) << where;
+}
+
+// 2,000 random scenes in four shards (separate ctest entries, so they run in parallel).
+class RandomScenes : public ::testing::TestWithParam<int> {};
+constexpr int SCENES_PER_SHARD = 500;
+
+TEST_P(RandomScenes, AllQueriesEqualBruteForce) {
+    int scenes = 0;
+    const auto first = static_cast<std::uint64_t>(1 + GetParam() * SCENES_PER_SHARD);
+    for (std::uint64_t seed = first; seed < first + SCENES_PER_SHARD; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        ProximityEngine brute;
+        const auto meshes = test::random_scene(rng);
+        for (const auto& m : meshes) {
+            ASSERT_TRUE(bvh.scene().add_object(m).ok());
+            ASSERT_TRUE(brute.scene().add_object(m).ok());
+        }
+        const double tol = test::uniform(rng, 0.0, 0.2);
+        auto a = bvh.query(full_request(CullerKind::bvh, tol));
+        auto b = brute.query(full_request(CullerKind::brute, tol));
+        ASSERT_TRUE(a.ok() && b.ok());
+        const std::string where = "seed " + std::to_string(seed);
+        expect_equal_answers(bvh.scene(), a.value(), b.value(), where);
+        ++scenes;
+        if (HasFatalFailure()) {
+            return;
+        }
+    }
+    EXPECT_EQ(scenes, SCENES_PER_SHARD);
+}
+INSTANTIATE_TEST_SUITE_P(QueriesVsBrute, RandomScenes, ::testing::Range(0, 4));
+
+TEST(QueriesVsBrute, BruteForceMatchesNaiveLoops) {
+    for (std::uint64_t seed = 10000; seed < 10150; ++seed) {
+        Rng rng(seed);
+        ProximityEngine engine;
+        for (const auto& m : test::random_scene(rng)) {
+            ASSERT_TRUE(engine.scene().add_object(m).ok());
+        }
+        const double tol = test::uniform(rng, 0.0, 0.2);
+        auto r = engine.query(full_request(CullerKind::brute, tol));
+        ASSERT_TRUE(r.ok());
+        const Scene& s = engine.scene();
+        for (std::size_t i = 0; i < s.size(); ++i) {
+            double best = std::numeric_limits<double>::infinity();
+            for (std::size_t j = 0; j < s.size(); ++j) {
+                if (j != i) {
+                    best = std::min(best, naive_object_distance(s[i], s[j]));
+                }
+            }
+            EXPECT_TRUE(same_distance(r->separation[i].distance, best)) << "seed " << seed;
+            for (std::uint32_t t = 0; t < s[i].triangle_count(); ++t) {
+                ASSERT_TRUE(same_distance(r->self[i][t].distance, naive_self_distance(s[i], t)))
+                    << "seed " << seed << " object " << i << " triangle " << t;
+            }
+        }
+        EXPECT_TRUE(same_pairs(r->collisions, naive_pairs(s, 0.0, true))) << "seed " << seed;
+        EXPECT_TRUE(same_pairs(r->tolerance, naive_pairs(s, tol, false))) << "seed " << seed;
+    }
+}
+
+// Several frames of deformation through one engine (refitted hierarchies, coherent sort),
+// against a fresh brute force every frame; one frame replaces an object by two fragments.
+TEST(QueriesVsBrute, DeformingFramesAndTopologyChange) {
+    for (std::uint64_t seed = 20000; seed < 20150; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        for (const auto& m : test::random_scene(rng)) {
+            ASSERT_TRUE(bvh.scene().add_object(m).ok());
+        }
+        ASSERT_TRUE(bvh.query(full_request(CullerKind::bvh, 0.05)).ok());  // builds
+        for (int frame = 1; frame <= 4; ++frame) {
+            SceneUpdate update;
+            if (frame == 2) {
+                // Topology change: the first object becomes two fragments (its two halves of
+                // triangles, each a new mesh), with no preprocessing step in between.
+                const SceneObject& o = bvh.scene()[0];
+                TriangleMesh whole{o.vertices, o.topology->triangles()};
+                TriangleMesh first{whole.vertices, {}};
+                TriangleMesh second{whole.vertices, {}};
+                for (std::size_t t = 0; t < whole.triangles.size(); ++t) {
+                    (t % 2 == 0 ? first : second).triangles.push_back(whole.triangles[t]);
+                }
+                SceneUpdate::Replacement rep{o.id, {{"frag-a", first}}};
+                if (!second.triangles.empty()) {
+                    rep.fragments.push_back({"frag-b", second});
+                }
+                update.replacements.push_back(std::move(rep));
+            }
+            for (const auto& o : bvh.scene().objects()) {
+                if (frame == 2 && o.id == bvh.scene()[0].id) {
+                    continue;
+                }
+                update.positions.push_back({o.id, test::jitter(rng, o.vertices, 0.05)});
+            }
+            ASSERT_TRUE(bvh.scene().apply(std::move(update)).ok());
+            ProximityEngine brute;
+            for (const auto& o : bvh.scene().objects()) {
+                ASSERT_TRUE(brute.scene()
+                                .add_object({o.name, {o.vertices, o.topology->triangles()}})
+                                .ok());
+            }
+            auto a = bvh.query(full_request(CullerKind::bvh, 0.05));
+            auto b = brute.query(full_request(CullerKind::brute, 0.05));
+            ASSERT_TRUE(a.ok() && b.ok());
+            expect_equal_answers(bvh.scene(), a.value(), b.value(),
+                                 "seed " + std::to_string(seed) + " frame " + std::to_string(frame));
+            if (HasFatalFailure()) {
+                return;
+            }
+        }
+    }
+}
+
+// Larger single objects where culling matters: the BVH must do far fewer exact tests than brute
+// force and still agree.
+TEST(QueriesVsBrute, FoldedSheetsCullAndAgree) {
+    for (std::uint64_t seed = 30000; seed < 30010; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        ProximityEngine brute;
+        for (int k = 0; k < 2; ++k) {
+            auto m = test::sheet(rng, 16, 12, test::uniform(rng, 0.005, 0.05));
+            test::transform(m, 1.0, {0.3 * k, 0.1 * k, 0.02 * k}, 0.1 * k);
+            ASSERT_TRUE(bvh.scene().add_object({"s", m}).ok());
+            ASSERT_TRUE(brute.scene().add_object({"s", m}).ok());
+        }
+        auto a = bvh.query(full_request(CullerKind::bvh, 0.02));
+        auto b = brute.query(full_request(CullerKind::brute, 0.02));
+        ASSERT_TRUE(a.ok() && b.ok());
+        expect_equal_answers(bvh.scene(), a.value(), b.value(), "seed " + std::to_string(seed));
+        EXPECT_LT(a->stats.exact_tests * 5, b->stats.exact_tests) << "seed " << seed;
+    }
+}
+
+}  // namespace
+}  // namespace proxima
