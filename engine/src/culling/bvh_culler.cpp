@@ -1,18 +1,42 @@
 // BVH culler: one AABB hierarchy per object, refitted when only positions change. Pairs are
-// culled by box distance scaled by CULL_SAFETY, so rounding in the box arithmetic can never drop
-// a pair whose computed distance would be the answer.
+// culled by box distance against the current best widened by the rounding slack, so rounding in
+// the box arithmetic can never drop a pair whose computed distance would be the answer.
 #include <algorithm>
 #include <unordered_map>
 
 #include <tbb/parallel_for.h>
 
 #include "culling/cullers.hpp"
+#include "proxima/distance/bounds.hpp"
 
 namespace proxima::detail {
 
 namespace {
-bool culled(double box_sq, double bound_sq) { return box_sq * CULL_SAFETY >= bound_sq; }
-bool outside_radius(double box_sq, double radius_sq) { return box_sq * CULL_SAFETY > radius_sq; }
+// A node pair is culled when its box distance reaches `threshold_sq`, the current best widened by
+// the rounding slack (cull_threshold_sq): rounding can then never drop a pair whose computed
+// distance is the answer, nor one tied with it.
+bool culled(double box_sq, double threshold_sq) { return box_sq >= threshold_sq; }
+
+double pair_slack(const Scene& scene, std::size_t a, std::size_t b) {
+    return rounding_slack(std::max(coordinate_scale(scene[a].box), coordinate_scale(scene[b].box)));
+}
+
+// Tracks the threshold of a bound that a visitor may lower, recomputing it only when it changed.
+struct Threshold {
+    const double& bound_sq;
+    double slack;
+    double seen = -1.0;
+    double value = 0.0;
+    double get() {
+        if (bound_sq != seen) {
+            seen = bound_sq;
+            value = cull_threshold_sq(bound_sq, slack);
+        }
+        return value;
+    }
+};
+
+double center_gap(const Aabb& a, const Aabb& b) { return squared_norm(a.center() - b.center()); }
 
 double node_size(const Bvh::Node& n) {
     const Vec3 e = n.box.extent();
@@ -66,17 +90,18 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
         std::uint32_t i, j;
         double d;
     };
+    Threshold th{bound_sq, pair_slack(scene, a, b)};
     std::vector<Item> stack;
     stack.reserve(64);
     const double d0 = box_squared_distance(na[0].box, nb[0].box);
-    if (culled(d0, bound_sq)) {
+    if (culled(d0, th.get())) {
         return;
     }
     stack.push_back({0, 0, d0});
     while (!stack.empty()) {
         const Item it = stack.back();
         stack.pop_back();
-        if (culled(it.d, bound_sq)) {
+        if (culled(it.d, th.get())) {
             continue;
         }
         const auto& x = na[it.i];
@@ -84,12 +109,12 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
         if (x.leaf() && y.leaf()) {
             for (auto p = x.first; p < x.first + x.count; ++p) {
                 const auto ta = ba.order()[p];
-                if (culled(box_squared_distance(boxes_a[ta], y.box), bound_sq)) {
+                if (culled(box_squared_distance(boxes_a[ta], y.box), th.get())) {
                     continue;
                 }
                 for (auto q = y.first; q < y.first + y.count; ++q) {
                     const auto tb = bb.order()[q];
-                    if (!culled(box_squared_distance(boxes_a[ta], boxes_b[tb]), bound_sq)) {
+                    if (!culled(box_squared_distance(boxes_a[ta], boxes_b[tb]), th.get())) {
                         visit(ta, tb);
                     }
                 }
@@ -107,13 +132,17 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
             c1 = {it.i, it.j + 1, box_squared_distance(x.box, nb[it.j + 1].box)};
             c2 = {it.i, y.first, box_squared_distance(x.box, nb[y.first].box)};
         }
-        if (c1.d > c2.d) {
+        // Overlapping boxes all have distance 0: among them, nearer centres are the likelier
+        // contact, so they go first (the order only affects speed, never the answer's value).
+        if (c1.d > c2.d ||
+            (c1.d == c2.d && c1.d == 0.0 &&
+             center_gap(na[c1.i].box, nb[c1.j].box) > center_gap(na[c2.i].box, nb[c2.j].box))) {
             std::swap(c1, c2);
         }
-        if (!culled(c2.d, bound_sq)) {
+        if (!culled(c2.d, th.get())) {
             stack.push_back(c2);
         }
-        if (!culled(c1.d, bound_sq)) {
+        if (!culled(c1.d, th.get())) {
             stack.push_back(c1);
         }
     }
@@ -131,12 +160,13 @@ void BvhCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t 
         std::uint32_t i;
         double d;
     };
+    Threshold th{bound_sq, pair_slack(scene, a, a)};
     Item stack[128];
     int top = 0;
     stack[top++] = {0, box_squared_distance(query, nodes[0].box)};
     while (top > 0) {
         const Item it = stack[--top];
-        if (culled(it.d, bound_sq)) {
+        if (culled(it.d, th.get())) {
             continue;
         }
         const auto& n = nodes[it.i];
@@ -146,7 +176,7 @@ void BvhCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t 
                 if (u == t || share_vertex(tt, tris[u])) {
                     continue;
                 }
-                if (!culled(box_squared_distance(query, boxes[u]), bound_sq)) {
+                if (!culled(box_squared_distance(query, boxes[u]), th.get())) {
                     visit(t, u);
                 }
             }
@@ -158,10 +188,10 @@ void BvhCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t 
             std::swap(c1, c2);
         }
         // Depth is bounded by the median-split build (log2 of the triangle count), far below 64.
-        if (!culled(c2.d, bound_sq)) {
+        if (!culled(c2.d, th.get())) {
             stack[top++] = c2;
         }
-        if (!culled(c1.d, bound_sq)) {
+        if (!culled(c1.d, th.get())) {
             stack[top++] = c1;
         }
     }
@@ -176,7 +206,7 @@ struct RadiusTraversal {
     const Bvh& bb;
     const std::vector<TriangleIndices>* tris;  // set when same
     bool same;
-    double radius_sq;
+    double threshold_sq;  // cull_threshold_sq(radius^2, slack)
 
     void emit(std::uint32_t ta, std::uint32_t tb, std::vector<TrianglePair>& out) const {
         if (same) {
@@ -187,8 +217,7 @@ struct RadiusTraversal {
                 std::swap(ta, tb);
             }
         }
-        if (!outside_radius(box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]),
-                            radius_sq)) {
+        if (box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]) <= threshold_sq) {
             out.emplace_back(ta, tb);
         }
     }
@@ -232,7 +261,7 @@ struct RadiusTraversal {
 
     void push_if_near(std::uint32_t i, std::uint32_t j,
                       std::vector<std::pair<std::uint32_t, std::uint32_t>>& next) const {
-        if (!outside_radius(box_squared_distance(ba.nodes()[i].box, bb.nodes()[j].box), radius_sq)) {
+        if (box_squared_distance(ba.nodes()[i].box, bb.nodes()[j].box) <= threshold_sq) {
             next.emplace_back(i, j);
         }
     }
@@ -253,9 +282,9 @@ void BvhCuller::pairs_within(const Scene& scene, std::size_t a, std::size_t b, d
                              std::vector<TrianglePair>& out) const {
     const Bvh& ba = m_entries[a].bvh;
     const Bvh& bb = m_entries[b].bvh;
-    RadiusTraversal tr{ba, bb, &scene[a].topology->triangles(), a == b, radius * radius};
-    if (a != b && outside_radius(box_squared_distance(ba.nodes()[0].box, bb.nodes()[0].box),
-                                 tr.radius_sq)) {
+    RadiusTraversal tr{ba, bb, &scene[a].topology->triangles(), a == b,
+                       cull_threshold_sq(radius * radius, pair_slack(scene, a, b))};
+    if (a != b && box_squared_distance(ba.nodes()[0].box, bb.nodes()[0].box) > tr.threshold_sq) {
         return;
     }
     // Expand breadth-first into enough independent node pairs to keep every core busy, then

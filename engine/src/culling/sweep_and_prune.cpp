@@ -4,6 +4,8 @@
 #include <cmath>
 #include <unordered_map>
 
+#include "proxima/distance/bounds.hpp"
+
 namespace proxima {
 
 double box_max_distance(const Aabb& a, const Aabb& b) {
@@ -56,19 +58,21 @@ void SweepAndPrune::update(const Scene& scene) {
     m_lo.resize(n);
     m_rank.assign(n, 0);
     m_max_extent = 0.0;
+    m_scale = 0.0;
     for (std::size_t k = 0; k < n; ++k) {
         const auto& obj = scene[m_order[k]];
         m_ids[k] = obj.id;
         m_lo[k] = obj.box.lo.x;
         m_rank[m_order[k]] = k;
         m_max_extent = std::max(m_max_extent, obj.box.hi.x - obj.box.lo.x);
+        m_scale = std::max(m_scale, coordinate_scale(obj.box));
     }
 }
 
 void SweepAndPrune::within(const Scene& scene, std::size_t i, double radius,
                            std::vector<std::size_t>& out) const {
     const Aabb& box = scene[i].box;
-    const double r = radius * (1.0 + 1e-12);
+    const double r = radius * (1.0 + 1e-9) + rounding_slack(m_scale);
     // Every j with box.lo.x - r - extent(j) <= lo_j <= box.hi.x + r may come within r along x.
     const double from = box.lo.x - r - m_max_extent;
     const double to = box.hi.x + r;
@@ -82,7 +86,7 @@ void SweepAndPrune::within(const Scene& scene, std::size_t i, double radius,
             continue;
         }
         const double d = box_squared_distance(box, scene[j].box);
-        if (d * CULL_SAFETY <= r_sq) {
+        if (d <= r_sq) {
             found.emplace_back(d, j);
         }
     }

@@ -176,6 +176,22 @@ void MeshTopology::two_ring(std::uint32_t t, std::vector<std::uint32_t>& out) co
     out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
+std::span<const std::uint32_t> MeshTopology::cached_two_ring(std::uint32_t t) const {
+    std::call_once(m_two_rings_once, [this] {
+        const auto nt = static_cast<std::uint32_t>(m_triangles.size());
+        m_two_rings.offsets.assign(nt + 1, 0);
+        std::vector<std::uint32_t> scratch;
+        for (std::uint32_t u = 0; u < nt; ++u) {
+            two_ring(u, scratch);
+            m_two_rings.triangles.insert(m_two_rings.triangles.end(), scratch.begin(),
+                                         scratch.end());
+            m_two_rings.offsets[u + 1] = static_cast<std::uint32_t>(m_two_rings.triangles.size());
+        }
+    });
+    return {m_two_rings.triangles.data() + m_two_rings.offsets[t],
+            m_two_rings.triangles.data() + m_two_rings.offsets[t + 1]};
+}
+
 ComponentSplit split_components(const TriangleMesh& mesh) {
     MeshTopology topo(mesh.triangles, mesh.vertices.size());
     ComponentSplit out;

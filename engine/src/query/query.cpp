@@ -1,11 +1,14 @@
+
 #include "proxima/query/query.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "proxima/distance/bounds.hpp"
 #include "proxima/distance/primitives.hpp"
 
 namespace proxima {
@@ -49,67 +52,205 @@ double seed_bound_sq(double upper) {
     return upper * upper * (1.0 + 1e-9) + std::numeric_limits<double>::min();
 }
 
+// Largest coordinate magnitude in the scene: sets the rounding slack of every comparison.
+double scene_scale(const Scene& scene) {
+    double s = 0.0;
+    for (const auto& o : scene.objects()) {
+        s = std::max(s, coordinate_scale(o.box));
+    }
+    return s;
+}
+
+// A found closest pair, ordered so that ties in distance resolve the same way on every run and
+// with any thread count: smaller distance, then smaller other object, then smaller triangles.
+bool better(double d_sq, std::int64_t other, std::uint32_t t, std::uint32_t u,
+            double best_sq, const Separation& best) {
+    if (d_sq != best_sq) {
+        return d_sq < best_sq;
+    }
+    return std::tie(other, t, u) < std::tie(best.other, best.triangle, best.other_triangle);
+}
+
+// Closest pair of triangles between objects i and j among pairs closer than sqrt(bound_sq), in the
+// culler's deterministic traversal order (first pair reaching the minimum). `found` is false when
+// no pair is closer than the bound.
+struct PairSearch {
+    bool found = false;
+    double squared_distance = std::numeric_limits<double>::infinity();
+    std::uint32_t triangle = 0;
+    std::uint32_t other_triangle = 0;
+    Vec3 point;
+    Vec3 other_point;
+    std::uint64_t exact_tests = 0;
+};
+
+PairSearch search_pair(const Scene& scene, const Culler& culler, std::size_t i, std::size_t j,
+                       double bound_sq, double slack) {
+    PairSearch r;
+    const SceneObject& a = scene[i];
+    const SceneObject& b = scene[j];
+    double threshold_sq = cull_threshold_sq(bound_sq, slack);
+    double threshold_of = bound_sq;
+    culler.nearest_between(scene, i, j, bound_sq, [&](std::uint32_t ta, std::uint32_t tb) {
+        const Triangle x = corners(a, ta);
+        const Triangle y = corners(b, tb);
+        if (std::isfinite(bound_sq)) {
+            if (threshold_of != bound_sq) {
+                threshold_sq = cull_threshold_sq(bound_sq, slack);
+                threshold_of = bound_sq;
+            }
+            const double lb = triangle_lower_bound(x, y, slack);
+            if (lb * lb >= threshold_sq) {
+                return;
+            }
+        }
+        ++r.exact_tests;
+        const auto cp = triangle_triangle(x, y);
+        if (cp.squared_distance < bound_sq) {
+            bound_sq = cp.squared_distance;
+            r.found = true;
+            r.squared_distance = cp.squared_distance;
+            r.triangle = ta;
+            r.other_triangle = tb;
+            r.point = cp.point_a;
+            r.other_point = cp.point_b;
+        }
+    });
+    return r;
+}
+
+// The brute-force reference: every object against every other, every triangle pair.
+void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
+                          QueryResult& result) {
+    const std::size_t n = scene.size();
+    std::atomic<std::uint64_t> object_pairs{0};
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+        if (work.should_stop()) {
+            return;
+        }
+        Separation best;
+        double best_sq = std::numeric_limits<double>::infinity();
+        std::uint64_t tests = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            if (j == i) {
+                continue;
+            }
+            const SceneObject& a = scene[i];
+            const SceneObject& b = scene[j];
+            culler.nearest_between(scene, i, j, best_sq, [&](std::uint32_t ta, std::uint32_t tb) {
+                ++tests;
+                const auto cp = triangle_triangle(corners(a, ta), corners(b, tb));
+                if (better(cp.squared_distance, static_cast<std::int64_t>(j), ta, tb, best_sq,
+                           best)) {
+                    best_sq = cp.squared_distance;
+                    best = {static_cast<std::int64_t>(j), ta, tb, 0.0, cp.point_a, cp.point_b};
+                }
+            });
+        }
+        if (best.other != NO_OBJECT) {
+            best.distance = std::sqrt(best_sq);
+        }
+        result.separation[i] = best;
+        work.exact_tests += tests;
+    });
+    result.stats.object_pairs_tested += n * (n - 1);
+}
+
+// Separation with object-level culling. Stage I gives each object an upper bound (closest box's
+// farthest corners) and the objects whose boxes lie within it; each unordered candidate pair is
+// searched once, bounded by the larger of its two objects' current bests, and improves both.
+// Pairs tied with an object's best are still searched (thresholds are widened, the search bound
+// is the next double up), so the tie-break in `better` sees every tied pair and the answer does
+// not depend on scheduling.
 void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrune& sap,
                     Work& work, QueryResult& result) {
     const std::size_t n = scene.size();
     result.separation.assign(n, Separation{});
-    std::atomic<std::uint64_t> object_pairs{0};
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1), [&](const auto& range) {
+    if (!culler.object_culling()) {
+        run_separation_brute(scene, culler, work, result);
+        return;
+    }
+    const double slack = rounding_slack(scene_scale(scene));
+    std::vector<double> upper(n);
+    std::vector<std::vector<std::size_t>> near(n);
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+        upper[i] = sap.separation_upper_bound(scene, i);
+        if (std::isfinite(upper[i])) {
+            sap.within(scene, i, upper[i], near[i]);
+        }
+    });
+    struct Candidate {
+        double box_sq;
+        std::uint32_t i, j;
+    };
+    std::vector<Candidate> pairs;
+    for (std::size_t i = 0; i < n; ++i) {
+        for (auto j : near[i]) {
+            const auto lo = static_cast<std::uint32_t>(std::min(i, j));
+            const auto hi = static_cast<std::uint32_t>(std::max(i, j));
+            pairs.push_back({box_squared_distance(scene[lo].box, scene[hi].box), lo, hi});
+        }
+    }
+    std::sort(pairs.begin(), pairs.end(), [](const Candidate& x, const Candidate& y) {
+        return std::tie(x.box_sq, x.i, x.j) < std::tie(y.box_sq, y.i, y.j);
+    });
+    pairs.erase(std::unique(pairs.begin(), pairs.end(),
+                            [](const Candidate& x, const Candidate& y) {
+                                return x.i == y.i && x.j == y.j;
+                            }),
+                pairs.end());
+
+    std::vector<std::atomic<double>> best_sq(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        best_sq[i].store(seed_bound_sq(upper[i]), std::memory_order_relaxed);
+    }
+    std::vector<double> exact_sq(n, std::numeric_limits<double>::infinity());
+    std::vector<std::mutex> locks(n);
+    std::atomic<std::uint64_t> searched{0};
+    auto offer = [&](std::size_t i, std::int64_t other, std::uint32_t t, std::uint32_t u,
+                     double d_sq, const Vec3& p, const Vec3& q) {
+        std::lock_guard<std::mutex> lock(locks[i]);
+        if (better(d_sq, other, t, u, exact_sq[i], result.separation[i])) {
+            exact_sq[i] = d_sq;
+            result.separation[i] = {other, t, u, 0.0, p, q};
+            if (d_sq < best_sq[i].load(std::memory_order_relaxed)) {
+                best_sq[i].store(d_sq, std::memory_order_relaxed);
+            }
+        }
+    };
+    // Pairs in increasing box distance: near pairs first tighten the bounds that cull the rest.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 1), [&](const auto& range) {
         std::uint64_t tests = 0;
-        std::uint64_t pairs = 0;
-        std::vector<std::size_t> candidates;
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
             if (work.should_stop()) {
                 break;
             }
-            Separation best;
-            double bound_sq = std::numeric_limits<double>::infinity();
-            candidates.clear();
-            if (culler.object_culling()) {
-                const double upper = sap.separation_upper_bound(scene, i);
-                bound_sq = seed_bound_sq(upper);
-                sap.within(scene, i, std::isfinite(upper) ? upper : 0.0, candidates);
-            } else {
-                for (std::size_t j = 0; j < n; ++j) {
-                    if (j != i) {
-                        candidates.push_back(j);
-                    }
-                }
+            const auto [box_sq, i, j] = pairs[k];
+            const double bound = std::max(best_sq[i].load(std::memory_order_relaxed),
+                                          best_sq[j].load(std::memory_order_relaxed));
+            if (box_sq >= cull_threshold_sq(bound, slack)) {
+                continue;
             }
-            const SceneObject& a = scene[i];
-            for (auto j : candidates) {
-                // Candidates come in increasing box distance: once one is beyond the bound, all
-                // the rest are too.
-                if (culler.object_culling() &&
-                    box_squared_distance(a.box, scene[j].box) * CULL_SAFETY >= bound_sq) {
-                    break;
-                }
-                ++pairs;
-                const SceneObject& b = scene[j];
-                culler.nearest_between(scene, i, j, bound_sq,
-                                       [&](std::uint32_t ta, std::uint32_t tb) {
-                                           ++tests;
-                                           const auto cp = triangle_triangle(corners(a, ta),
-                                                                             corners(b, tb));
-                                           if (cp.squared_distance < bound_sq) {
-                                               bound_sq = cp.squared_distance;
-                                               best.other = static_cast<std::int64_t>(j);
-                                               best.triangle = ta;
-                                               best.other_triangle = tb;
-                                               best.point = cp.point_a;
-                                               best.other_point = cp.point_b;
-                                           }
-                                       });
+            ++searched;
+            const auto r = search_pair(scene, culler, i, j,
+                                       std::nextafter(bound, std::numeric_limits<double>::infinity()),
+                                       slack);
+            tests += r.exact_tests;
+            if (r.found) {
+                offer(i, j, r.triangle, r.other_triangle, r.squared_distance, r.point,
+                      r.other_point);
+                offer(j, i, r.other_triangle, r.triangle, r.squared_distance, r.other_point,
+                      r.point);
             }
-            if (best.other != NO_OBJECT) {
-                best.distance = std::sqrt(bound_sq);
-            }
-            result.separation[i] = best;
         }
         work.exact_tests += tests;
-        object_pairs += pairs;
     });
-    result.stats.object_pairs_tested += object_pairs;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (result.separation[i].other != NO_OBJECT) {
+            result.separation[i].distance = std::sqrt(exact_sq[i]);
+        }
+    }
+    result.stats.object_pairs_tested += searched;
 }
 
 void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult& result) {
@@ -122,20 +263,35 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
         const SceneObject& obj = scene[a];
         const MeshTopology& topo = *obj.topology;
         const auto nt = static_cast<std::uint32_t>(obj.triangle_count());
+        const double slack = rounding_slack(coordinate_scale(obj.box));
+        const bool cull = culler.object_culling();
         tbb::parallel_for(
             tbb::blocked_range<std::uint32_t>(0, nt, 256), [&](const auto& range) {
                 if (work.should_stop()) {
                     return;
                 }
                 std::uint64_t tests = 0;
-                std::vector<std::uint32_t> ring;
+                std::vector<std::pair<double, std::uint32_t>> order;
                 for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
                     SelfDistance best;
                     double bound_sq = std::numeric_limits<double>::infinity();
                     const Triangle tt = corners(obj, t);
+                    double threshold_sq = std::numeric_limits<double>::infinity();
+                    double threshold_of = bound_sq;
                     auto test = [&](std::uint32_t u) {
+                        const Triangle tu = corners(obj, u);
+                        if (cull && std::isfinite(bound_sq)) {
+                            if (threshold_of != bound_sq) {
+                                threshold_sq = cull_threshold_sq(bound_sq, slack);
+                                threshold_of = bound_sq;
+                            }
+                            const double lb = triangle_lower_bound(tt, tu, slack);
+                            if (lb * lb >= threshold_sq) {
+                                return;
+                            }
+                        }
                         ++tests;
-                        const auto cp = triangle_triangle(tt, corners(obj, u));
+                        const auto cp = triangle_triangle(tt, tu);
                         if (cp.squared_distance < bound_sq) {
                             bound_sq = cp.squared_distance;
                             best.closest = u;
@@ -146,8 +302,19 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
                     if (culler.object_culling()) {
                         // Seed §5.2.2: the 2-ring's closest triangle is an upper bound that is
                         // usually tight on meshes, so the hierarchy search below prunes early.
-                        topo.two_ring(t, ring);
+                        const auto ring = topo.cached_two_ring(t);
+                        // Nearest centroids first: the first tests set a tight bound, and the
+                        // cheap lower bounds then skip most of the rest.
+                        const Vec3 ct = (tt[0] + tt[1] + tt[2]) / 3.0;
+                        order.clear();
                         for (auto u : ring) {
+                            const auto& iu = obj.triangle(u);
+                            const Vec3 cu = (obj.vertices[iu[0]] + obj.vertices[iu[1]] +
+                                             obj.vertices[iu[2]]) / 3.0;
+                            order.emplace_back(squared_norm(cu - ct), u);
+                        }
+                        std::sort(order.begin(), order.end());
+                        for (const auto& [d, u] : order) {
                             test(u);
                         }
                         culler.nearest_within(scene, a, t, bound_sq,

@@ -16,8 +16,8 @@ public:
     // Re-sorts after the scene changed. Keeps the previous order for surviving objects.
     void update(const Scene& scene);
 
-    // Scene indices j != i whose box may lie within `radius` of object i's box (box distance
-    // scaled by CULL_SAFETY <= radius), appended to `out` in increasing box distance.
+    // Scene indices j != i whose box may lie within `radius` of object i's box (the radius widened
+    // by the rounding slack of the scene's coordinates), appended in increasing box distance.
     void within(const Scene& scene, std::size_t i, double radius,
                 std::vector<std::size_t>& out) const;
 
@@ -35,6 +35,7 @@ private:
     std::vector<std::size_t> m_rank;     // scene index -> position in m_order
     std::vector<double> m_lo;            // box.lo.x in m_order order
     double m_max_extent = 0.0;           // largest box extent along x
+    double m_scale = 0.0;                // largest coordinate magnitude (for rounding slack)
     std::uint64_t m_swaps = 0;
 };
 

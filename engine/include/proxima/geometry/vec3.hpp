@@ -73,10 +73,8 @@ inline Aabb triangle_box(const Vec3& a, const Vec3& b, const Vec3& c) {
 }
 
 // Squared Euclidean distance between two boxes: a lower bound on the squared distance between
-// anything inside them. Exact in the sense that it never exceeds the true value: each per-axis gap
-// is a single subtraction rounded to nearest, then squared and summed, and callers compare it
-// against squared distances computed from the same primitives with a safety factor (see
-// `lower_bound_safe`).
+// anything inside them, up to rounding (callers compare it against a threshold widened by the
+// rounding slack of distance/bounds.hpp).
 inline double box_squared_distance(const Aabb& a, const Aabb& b) {
     double d = 0.0;
     for (int k = 0; k < 3; ++k) {
@@ -85,11 +83,5 @@ inline double box_squared_distance(const Aabb& a, const Aabb& b) {
     }
     return d;
 }
-
-// Rounding can make a computed box distance exceed the computed distance between two primitives
-// inside the boxes by a few ulps. Culling compares a *shrunk* box distance against the current best,
-// so rounding can never cull a pair whose computed distance is the minimum. The factor covers the
-// relative error of the box-gap computation and of the primitive distance (well under 1e-12).
-constexpr double CULL_SAFETY = 1.0 - 1e-9;
 
 }  // namespace proxima

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -58,6 +59,9 @@ public:
     std::vector<std::uint32_t> two_ring(std::uint32_t t) const;
     // Same, into a caller-owned buffer (cleared first): no allocation once it has grown.
     void two_ring(std::uint32_t t, std::vector<std::uint32_t>& out) const;
+    // All 2-rings at once (CSR), built on first use and kept for the topology's lifetime: the
+    // intra-object query reads them every frame, and they depend on connectivity only.
+    std::span<const std::uint32_t> cached_two_ring(std::uint32_t t) const;
     // True when t and u share a vertex index or are the same triangle: such pairs are excluded
     // from intra-object queries.
     bool adjacent(std::uint32_t t, std::uint32_t u) const {
@@ -78,6 +82,12 @@ private:
     std::vector<std::uint32_t> m_ring_tris;
     std::vector<std::uint32_t> m_triangle_component;
     std::size_t m_component_count = 0;
+    struct TwoRings {
+        std::vector<std::uint32_t> offsets;
+        std::vector<std::uint32_t> triangles;
+    };
+    mutable std::once_flag m_two_rings_once;
+    mutable TwoRings m_two_rings;
 };
 
 // Splits a mesh into one mesh per connected component, in component order (by smallest triangle

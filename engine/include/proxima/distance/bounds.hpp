@@ -1,0 +1,47 @@
+#pragma once
+// Cheap, conservative lower bounds on the distance between two triangles, used to skip exact
+// tests that cannot beat the current best. "Conservative" includes rounding: each bound has the
+// floating-point error of its own evaluation, and the error of the exact test it stands in for,
+// subtracted, so a skipped pair can never be one whose *computed* distance is the answer.
+
+#include "proxima/distance/primitives.hpp"
+
+namespace proxima {
+
+// Slack, in scene units, for comparisons between a bound and computed distances of primitives
+// whose coordinates are at most `scale` in magnitude: covers the absolute rounding error of both.
+inline double rounding_slack(double scale) { return 1e-12 * scale; }
+
+// The effective squared bound a lower bound must reach before a pair may be skipped: the current
+// best distance widened by a relative factor and the absolute slack.
+inline double cull_threshold_sq(double best_sq, double slack) {
+    const double b = std::sqrt(best_sq) * (1.0 + 1e-9) + slack;
+    return b * b;
+}
+
+// Largest coordinate magnitude of a box (for rounding_slack).
+inline double coordinate_scale(const Aabb& box) {
+    double s = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        s = std::max({s, std::abs(box.lo[k]), std::abs(box.hi[k])});
+    }
+    return s;
+}
+
+// Separating-plane bound: the distance from one triangle's supporting plane to the other triangle
+// when the other lies strictly on one side, the larger of the two; 0 when neither plane separates
+// (or a triangle is too thin for its plane to be trusted). Never above the true distance by more
+// than the rounding slack it accounts for.
+double plane_lower_bound(const Triangle& a, const Triangle& b, double slack);
+
+// Separating-axis bound along the line through the two centroids: the gap between the triangles'
+// projections on it. Strong where the plane bound is useless: neighbouring triangles of one flat
+// sheet (the usual intra-object case).
+double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
+
+// The larger of the two bounds above.
+inline double triangle_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    return std::max(plane_lower_bound(a, b, slack), axis_lower_bound(a, b, slack));
+}
+
+}  // namespace proxima
