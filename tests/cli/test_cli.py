@@ -109,7 +109,8 @@ class Cli(unittest.TestCase):
         self.assertIsNone(doc["objects"][0]["separation"]["other"])
 
     def test_self_collisions_tolerance(self):
-        doc = self.distance("--self", "--collisions", "--tolerance", "0.3", self.two)
+        doc = self.distance("--self", "--collisions", "--tolerance", "0.3", "--split-components",
+                            self.two)
         self.assertEqual(len(doc["self"]), 24)
         for e in doc["self"]:
             self.assertEqual(set(e), {"object", "triangle", "closest", "distance"})

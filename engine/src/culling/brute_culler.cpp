@@ -1,5 +1,7 @@
 // The brute-force reference: every pair, no bounds consulted. Queries through it are the
 // definition of the right answer that every other culler is tested against.
+#include <tbb/parallel_for.h>
+
 #include "culling/cullers.hpp"
 
 namespace proxima::detail {
@@ -15,15 +17,19 @@ void BruteCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t
     }
 }
 
-void BruteCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t t,
-                                 double& bound_sq, PairVisitor visit) const {
+void BruteCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
+                             PairVisitor visit) const {
     const auto& topo = *scene[a].topology;
     const auto n = static_cast<std::uint32_t>(topo.triangle_count());
-    for (std::uint32_t u = 0; u < n; ++u) {
-        if (!topo.adjacent(t, u)) {
-            visit(t, u);
+    // Every non-adjacent pair, whatever the bounds; parallel over the first triangle only to keep
+    // the reference affordable in tests.
+    tbb::parallel_for(std::uint32_t{0}, n, [&](std::uint32_t t) {
+        for (std::uint32_t u = t + 1; u < n; ++u) {
+            if (!topo.adjacent(t, u)) {
+                visit(t, u);
+            }
         }
-    }
+    });
 }
 
 void BruteCuller::pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <unordered_map>
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "culling/cullers.hpp"
@@ -148,53 +149,130 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
     }
 }
 
-void BvhCuller::nearest_within(const Scene& scene, std::size_t a, std::uint32_t t,
-                               double& bound_sq, PairVisitor visit) const {
-    const Bvh& bvh = m_entries[a].bvh;
-    const auto& nodes = bvh.nodes();
-    const auto& boxes = bvh.triangle_boxes();
-    const auto& tris = scene[a].topology->triangles();
-    const Aabb query = boxes[t];
-    const TriangleIndices& tt = tris[t];
-    struct Item {
-        std::uint32_t i;
-        double d;
-    };
-    Threshold th{bound_sq, pair_slack(scene, a, a)};
-    Item stack[128];
-    int top = 0;
-    stack[top++] = {0, box_squared_distance(query, nodes[0].box)};
-    while (top > 0) {
-        const Item it = stack[--top];
-        if (culled(it.d, th.get())) {
-            continue;
-        }
-        const auto& n = nodes[it.i];
-        if (n.leaf()) {
-            for (auto p = n.first; p < n.first + n.count; ++p) {
-                const auto u = bvh.order()[p];
-                if (u == t || share_vertex(tt, tris[u])) {
-                    continue;
-                }
-                if (!culled(box_squared_distance(query, boxes[u]), th.get())) {
-                    visit(t, u);
-                }
-            }
-            continue;
-        }
-        Item c1{it.i + 1, box_squared_distance(query, nodes[it.i + 1].box)};
-        Item c2{n.first, box_squared_distance(query, nodes[n.first].box)};
-        if (c1.d > c2.d) {
-            std::swap(c1, c2);
-        }
-        // Depth is bounded by the median-split build (log2 of the triangle count), far below 64.
-        if (!culled(c2.d, th.get())) {
-            stack[top++] = c2;
-        }
-        if (!culled(c1.d, th.get())) {
-            stack[top++] = c1;
+namespace {
+
+// Dual traversal of one hierarchy against itself for the intra-object nearest search. Each
+// unordered node pair is visited once: (X, X) expands to (L, L), (R, R) and (L, R). A node pair is
+// culled when its box distance reaches the larger of the two nodes' thresholds, where a node's
+// threshold comes from the largest bound in its subtree (computed once at the start; bounds only
+// shrink, so it stays valid).
+struct SelfTraversal {
+    const Bvh& bvh;
+    const std::vector<TriangleIndices>& tris;
+    const std::vector<double>& node_threshold;
+    BoundLookup bound_sq;
+    PairVisitor visit;
+    double slack;
+
+    using NodePair = std::pair<std::uint32_t, std::uint32_t>;
+
+    double threshold_of(std::uint32_t t) const { return cull_threshold_sq(bound_sq(t), slack); }
+
+    void push_if_near(std::uint32_t i, std::uint32_t j, std::vector<NodePair>& next) const {
+        const auto& nodes = bvh.nodes();
+        if (box_squared_distance(nodes[i].box, nodes[j].box) <
+            std::max(node_threshold[i], node_threshold[j])) {
+            next.emplace_back(i, j);
         }
     }
+
+    void leaf_pairs(const Bvh::Node& x, const Bvh::Node& y, bool same) const {
+        const auto& boxes = bvh.triangle_boxes();
+        const auto& order = bvh.order();
+        double ty[Bvh::LEAF_SIZE];
+        for (std::uint32_t q = 0; q < y.count; ++q) {
+            ty[q] = threshold_of(order[y.first + q]);
+        }
+        for (std::uint32_t p = 0; p < x.count; ++p) {
+            const auto t = order[x.first + p];
+            const double tt = same ? ty[p] : threshold_of(t);
+            for (std::uint32_t q = same ? p + 1 : 0; q < y.count; ++q) {
+                const auto u = order[y.first + q];
+                if (share_vertex(tris[t], tris[u])) {
+                    continue;
+                }
+                if (box_squared_distance(boxes[t], boxes[u]) < std::max(tt, ty[q])) {
+                    if (t < u) {
+                        visit(t, u);
+                    } else {
+                        visit(u, t);
+                    }
+                }
+            }
+        }
+    }
+
+    void step(std::uint32_t i, std::uint32_t j, std::vector<NodePair>& next) const {
+        const auto& nodes = bvh.nodes();
+        const auto& x = nodes[i];
+        const auto& y = nodes[j];
+        if (i == j) {
+            if (x.leaf()) {
+                leaf_pairs(x, x, true);
+                return;
+            }
+            next.emplace_back(i + 1, i + 1);
+            next.emplace_back(x.first, x.first);
+            push_if_near(i + 1, x.first, next);
+            return;
+        }
+        if (x.leaf() && y.leaf()) {
+            leaf_pairs(x, y, false);
+            return;
+        }
+        if (!x.leaf() && (y.leaf() || node_size(x) >= node_size(y))) {
+            push_if_near(i + 1, j, next);
+            push_if_near(x.first, j, next);
+        } else {
+            push_if_near(i, j + 1, next);
+            push_if_near(i, y.first, next);
+        }
+    }
+};
+
+}  // namespace
+
+void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
+                           PairVisitor visit) const {
+    const Bvh& bvh = m_entries[a].bvh;
+    const auto& nodes = bvh.nodes();
+    const double slack = pair_slack(scene, a, a);
+    // Largest bound per subtree, bottom-up (children have larger indices than their parent).
+    std::vector<double> node_threshold(nodes.size());
+    for (auto i = nodes.size(); i-- > 0;) {
+        const auto& n = nodes[i];
+        double m = 0.0;
+        if (n.leaf()) {
+            for (auto k = n.first; k < n.first + n.count; ++k) {
+                m = std::max(m, bound_sq(bvh.order()[k]));
+            }
+            node_threshold[i] = cull_threshold_sq(m, slack);
+        } else {
+            node_threshold[i] = std::max(node_threshold[i + 1], node_threshold[n.first]);
+        }
+    }
+    SelfTraversal tr{bvh, scene[a].topology->triangles(), node_threshold, bound_sq, visit, slack};
+    std::vector<SelfTraversal::NodePair> frontier{{0, 0}};
+    std::vector<SelfTraversal::NodePair> next;
+    while (!frontier.empty() && frontier.size() < 512) {
+        next.clear();
+        for (auto [i, j] : frontier) {
+            tr.step(i, j, next);
+        }
+        frontier.swap(next);
+    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 4),
+                      [&](const auto& range) {
+                          std::vector<SelfTraversal::NodePair> stack;
+                          for (auto k = range.begin(); k != range.end(); ++k) {
+                              stack.assign(1, frontier[k]);
+                              while (!stack.empty()) {
+                                  const auto [i, j] = stack.back();
+                                  stack.pop_back();
+                                  tr.step(i, j, stack);
+                              }
+                          }
+                      });
 }
 
 namespace {

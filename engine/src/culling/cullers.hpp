@@ -15,8 +15,8 @@ public:
     void prepare(const Scene&) override {}
     void nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
                          PairVisitor visit) const override;
-    void nearest_within(const Scene& scene, std::size_t a, std::uint32_t t, double& bound_sq,
-                        PairVisitor visit) const override;
+    void self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
+                    PairVisitor visit) const override;
     void pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
                       std::vector<TrianglePair>& out) const override;
 };
@@ -28,8 +28,8 @@ public:
     void prepare(const Scene& scene) override;
     void nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
                          PairVisitor visit) const override;
-    void nearest_within(const Scene& scene, std::size_t a, std::uint32_t t, double& bound_sq,
-                        PairVisitor visit) const override;
+    void self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
+                    PairVisitor visit) const override;
     void pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
                       std::vector<TrianglePair>& out) const override;
 

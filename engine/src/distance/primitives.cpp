@@ -3,9 +3,9 @@
 // test built on orient2d / orient3d.
 //
 // Invariants kept by every routine here:
-// - every division has a denominator checked to be > 0, and every parameter it produces is
-//   clamped to its range, so finite input never yields NaN and returned points lie on their
-//   primitives up to the rounding of `a + t * (b - a)`;
+// - every quotient either has a denominator checked to be > 0 or is clamped to its parameter
+//   range, where a NaN (0 / 0) or inf quotient maps into [0, 1]; so finite input never yields NaN
+//   and returned points lie on their primitives up to the rounding of `a + t * (b - a)`;
 // - `squared_distance` is always squared_norm(point_a - point_b) of the returned points;
 // - intersection *decisions* use only the exact predicates; floating point is used only to place
 //   witness points.
@@ -199,7 +199,8 @@ inline Segment make_segment(const Vec3& p0, const Vec3& p1) {
 
 // Ericson 5.1.9: parameters s on P and t on Q of a closest pair. Exact zero tests rather than
 // epsilons: any positive length is a valid divisor, and a quotient that overflows to inf is
-// clamped like any other. Sets `nearly_parallel` when s is poorly conditioned.
+// clamped like any other. For parallel segments (denom == 0) s starts at 0 and is recomputed
+// after t is clamped, as in the book. Sets `nearly_parallel` when s is poorly conditioned.
 inline void closest_parameters(const Segment& sp, const Segment& sq, double& s, double& t,
                                bool& nearly_parallel) {
     const Vec3 r = sp.p - sq.p;
@@ -295,11 +296,12 @@ bool segments_intersect_2d(const Point2& p, const Point2& q, const Point2& r, co
         // All four points on one line (or the segments are points): on a line, the closed
         // segments overlap iff their coordinate ranges overlap on both axes (one axis is injective
         // on the line; the other is then implied, or constant).
-        return std::max(p.u, q.u) >= std::min(r.u, s.u) && std::max(r.u, s.u) >= std::min(p.u, q.u) &&
+        return std::max(p.u, q.u) >= std::min(r.u, s.u) &&
+               std::max(r.u, s.u) >= std::min(p.u, q.u) &&
                std::max(p.v, q.v) >= std::min(r.v, s.v) && std::max(r.v, s.v) >= std::min(p.v, q.v);
     }
-    // Otherwise neither pair is a degenerate "both zero" unless the other pair is strictly
-    // one-sided (a point off the other segment's line), which the products below reject.
+    // Not all collinear. If o1 == o2 == 0 here, then p == q off the line rs (o3 == o4 != 0), and
+    // symmetrically; the products reject those. Otherwise this is the usual straddle test.
     return o1 * o2 <= 0 && o3 * o4 <= 0;
 }
 
@@ -426,13 +428,7 @@ bool segment_meets_triangle(const Vec3& p, const Vec3& q, int sp, int sq, const 
         }
         return true;
     }
-    if (inside_triangle_2d(a2, b2, c2, q2)) {
-        if (witness != nullptr) {
-            *witness = q;
-        }
-        return true;
-    }
-    // Neither endpoint inside: the segment meets the triangle iff it meets its boundary.
+    // p outside: the segment meets the triangle iff it meets its boundary.
     const Point2 e2[3][2] = {{a2, b2}, {b2, c2}, {c2, a2}};
     const Vec3* e3[3][2] = {{&a, &b}, {&b, &c}, {&c, &a}};
     for (int i = 0; i < 3; ++i) {

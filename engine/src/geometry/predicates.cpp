@@ -164,8 +164,8 @@ int orient2d(double ax, double ay, double bx, double by, double cx, double cy) {
     const double bcx = bx - cx;
     const double acy = ay - cy;
     const double bcy = by - cy;
-    const bool in_range = in_filter_range(acx) & in_filter_range(bcx) & in_filter_range(acy) &
-                          in_filter_range(bcy);
+    const bool in_range =
+        in_filter_range(acx) & in_filter_range(bcx) & in_filter_range(acy) & in_filter_range(bcy);
     if (in_range) {
         const double detleft = acx * bcy;
         const double detright = acy * bcx;

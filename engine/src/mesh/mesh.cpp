@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <numeric>
 
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 namespace proxima {
 
 Status validate_mesh(const TriangleMesh& mesh, const std::string& what) {
@@ -178,14 +181,34 @@ void MeshTopology::two_ring(std::uint32_t t, std::vector<std::uint32_t>& out) co
 
 std::span<const std::uint32_t> MeshTopology::cached_two_ring(std::uint32_t t) const {
     std::call_once(m_two_rings_once, [this] {
+        // Built in parallel chunks (the first intra-object query after a topology change waits
+        // for it), then concatenated in triangle order.
         const auto nt = static_cast<std::uint32_t>(m_triangles.size());
+        constexpr std::uint32_t CHUNK = 2048;
+        const std::uint32_t chunks = (nt + CHUNK - 1) / CHUNK;
+        std::vector<std::vector<std::uint32_t>> parts(chunks);
+        std::vector<std::vector<std::uint32_t>> sizes(chunks);
+        // Isolated: while this thread waits for the chunks it must not pick up an outer task that
+        // calls cached_two_ring() again (a recursive call_once would deadlock).
+        tbb::this_task_arena::isolate([&] {
+            tbb::parallel_for(std::uint32_t{0}, chunks, [&](std::uint32_t c) {
+                std::vector<std::uint32_t> scratch;
+                for (std::uint32_t u = c * CHUNK; u < std::min(nt, (c + 1) * CHUNK); ++u) {
+                    two_ring(u, scratch);
+                    parts[c].insert(parts[c].end(), scratch.begin(), scratch.end());
+                    sizes[c].push_back(static_cast<std::uint32_t>(scratch.size()));
+                }
+            });
+        });
         m_two_rings.offsets.assign(nt + 1, 0);
-        std::vector<std::uint32_t> scratch;
-        for (std::uint32_t u = 0; u < nt; ++u) {
-            two_ring(u, scratch);
-            m_two_rings.triangles.insert(m_two_rings.triangles.end(), scratch.begin(),
-                                         scratch.end());
-            m_two_rings.offsets[u + 1] = static_cast<std::uint32_t>(m_two_rings.triangles.size());
+        std::uint32_t t = 0;
+        for (std::uint32_t c = 0; c < chunks; ++c) {
+            for (auto n : sizes[c]) {
+                m_two_rings.offsets[t + 1] = m_two_rings.offsets[t] + n;
+                ++t;
+            }
+            m_two_rings.triangles.insert(m_two_rings.triangles.end(), parts[c].begin(),
+                                         parts[c].end());
         }
     });
     return {m_two_rings.triangles.data() + m_two_rings.offsets[t],

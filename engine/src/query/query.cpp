@@ -2,6 +2,7 @@
 #include "proxima/query/query.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <mutex>
 
@@ -253,87 +254,140 @@ void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrun
     result.stats.object_pairs_tested += searched;
 }
 
+// Per-triangle best of the intra-object query, shared by the threads of one object's search.
+// The squared bound is readable without a lock (culling only needs a valid upper bound); the
+// best pair is updated under a striped lock with a deterministic tie-break (smaller distance,
+// then smaller triangle index), so the answer does not depend on scheduling.
+class SelfBests {
+public:
+    explicit SelfBests(std::vector<SelfDistance>& out)
+        : m_out(out), m_bound(out.size()), m_exact(out.size(), std::numeric_limits<double>::infinity()) {
+        for (auto& b : m_bound) {
+            b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
+        }
+    }
+    double bound(std::uint32_t t) const { return m_bound[t].load(std::memory_order_relaxed); }
+
+    void offer(std::uint32_t t, std::uint32_t u, double d_sq, const Vec3& p, const Vec3& q) {
+        if (d_sq > bound(t)) {
+            return;
+        }
+        std::lock_guard<std::mutex> lock(m_locks[t % m_locks.size()]);
+        SelfDistance& best = m_out[t];
+        if (d_sq < m_exact[t] || (d_sq == m_exact[t] && static_cast<std::int64_t>(u) < best.closest)) {
+            m_exact[t] = d_sq;
+            best.closest = u;
+            best.point = p;
+            best.other_point = q;
+            m_bound[t].store(d_sq, std::memory_order_relaxed);
+        }
+    }
+
+    void finish() {
+        for (std::size_t t = 0; t < m_out.size(); ++t) {
+            if (m_out[t].closest != NO_OBJECT) {
+                m_out[t].distance = std::sqrt(m_exact[t]);
+            }
+        }
+    }
+
+private:
+    std::vector<SelfDistance>& m_out;
+    std::vector<std::atomic<double>> m_bound;
+    std::vector<double> m_exact;
+    std::array<std::mutex, 256> m_locks;
+};
+
+// Intra-object query (seed §5.2.2): for every triangle, its closest triangle sharing no vertex.
+// With culling, each triangle's 2-ring seeds its bound (each unordered pair tested once, nearest
+// centroids first, both triangles improved), then the culler's dual traversal proposes every pair
+// that may still beat either triangle's bound. Brute force tests every non-adjacent pair.
 void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult& result) {
     const std::size_t n = scene.size();
     result.self.assign(n, {});
     for (std::size_t a = 0; a < n; ++a) {
         result.self[a].assign(scene[a].triangle_count(), SelfDistance{});
     }
+    const bool cull = culler.object_culling();
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t a) {
+        if (work.should_stop()) {
+            return;
+        }
         const SceneObject& obj = scene[a];
         const MeshTopology& topo = *obj.topology;
         const auto nt = static_cast<std::uint32_t>(obj.triangle_count());
         const double slack = rounding_slack(coordinate_scale(obj.box));
-        const bool cull = culler.object_culling();
-        tbb::parallel_for(
-            tbb::blocked_range<std::uint32_t>(0, nt, 256), [&](const auto& range) {
+        SelfBests bests(result.self[a]);
+        std::atomic<std::uint64_t> tests{0};
+
+        // Exact test of one pair, skipped when a cheap lower bound shows it cannot beat (or tie)
+        // either triangle's current best.
+        auto test = [&](std::uint32_t t, std::uint32_t u, const Triangle& x, std::uint64_t& count) {
+            const Triangle y = corners(obj, u);
+            if (cull) {
+                const double bound = std::max(bests.bound(t), bests.bound(u));
+                if (std::isfinite(bound)) {
+                    const double lb = triangle_lower_bound(x, y, slack);
+                    if (lb * lb >= cull_threshold_sq(bound, slack)) {
+                        return;
+                    }
+                }
+            }
+            ++count;
+            const auto cp = triangle_triangle(x, y);
+            bests.offer(t, u, cp.squared_distance, cp.point_a, cp.point_b);
+            bests.offer(u, t, cp.squared_distance, cp.point_b, cp.point_a);
+        };
+
+        if (cull) {
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
                 if (work.should_stop()) {
                     return;
                 }
-                std::uint64_t tests = 0;
+                std::uint64_t count = 0;
                 std::vector<std::pair<double, std::uint32_t>> order;
                 for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                    SelfDistance best;
-                    double bound_sq = std::numeric_limits<double>::infinity();
-                    const Triangle tt = corners(obj, t);
-                    double threshold_sq = std::numeric_limits<double>::infinity();
-                    double threshold_of = bound_sq;
-                    auto test = [&](std::uint32_t u) {
-                        const Triangle tu = corners(obj, u);
-                        if (cull && std::isfinite(bound_sq)) {
-                            if (threshold_of != bound_sq) {
-                                threshold_sq = cull_threshold_sq(bound_sq, slack);
-                                threshold_of = bound_sq;
-                            }
-                            const double lb = triangle_lower_bound(tt, tu, slack);
-                            if (lb * lb >= threshold_sq) {
-                                return;
-                            }
-                        }
-                        ++tests;
-                        const auto cp = triangle_triangle(tt, tu);
-                        if (cp.squared_distance < bound_sq) {
-                            bound_sq = cp.squared_distance;
-                            best.closest = u;
-                            best.point = cp.point_a;
-                            best.other_point = cp.point_b;
-                        }
-                    };
-                    if (culler.object_culling()) {
-                        // Seed §5.2.2: the 2-ring's closest triangle is an upper bound that is
-                        // usually tight on meshes, so the hierarchy search below prunes early.
-                        const auto ring = topo.cached_two_ring(t);
-                        // Nearest centroids first: the first tests set a tight bound, and the
-                        // cheap lower bounds then skip most of the rest.
-                        const Vec3 ct = (tt[0] + tt[1] + tt[2]) / 3.0;
-                        order.clear();
-                        for (auto u : ring) {
+                    const Triangle x = corners(obj, t);
+                    const Vec3 ct = (x[0] + x[1] + x[2]) / 3.0;
+                    order.clear();
+                    for (auto u : topo.cached_two_ring(t)) {
+                        if (u > t) {
                             const auto& iu = obj.triangle(u);
                             const Vec3 cu = (obj.vertices[iu[0]] + obj.vertices[iu[1]] +
                                              obj.vertices[iu[2]]) / 3.0;
                             order.emplace_back(squared_norm(cu - ct), u);
                         }
-                        std::sort(order.begin(), order.end());
-                        for (const auto& [d, u] : order) {
-                            test(u);
-                        }
-                        culler.nearest_within(scene, a, t, bound_sq,
-                                              [&](std::uint32_t, std::uint32_t u) {
-                                                  if (!std::binary_search(ring.begin(), ring.end(), u)) {
-                                                      test(u);
-                                                  }
-                                              });
-                    } else {
-                        culler.nearest_within(scene, a, t, bound_sq,
-                                              [&](std::uint32_t, std::uint32_t u) { test(u); });
                     }
-                    if (best.closest != NO_OBJECT) {
-                        best.distance = std::sqrt(bound_sq);
+                    std::sort(order.begin(), order.end());
+                    for (const auto& [d, u] : order) {
+                        test(t, u, x, count);
                     }
-                    result.self[a][t] = best;
                 }
-                work.exact_tests += tests;
+                tests += count;
             });
+        }
+        if (work.should_stop()) {
+            return;
+        }
+        // The visitor runs on several threads: per-thread counts would need thread-local storage,
+        // so count into a relaxed atomic in small batches.
+        culler.self_pairs(
+            scene, a, [&](std::uint32_t t) { return bests.bound(t); },
+            [&](std::uint32_t t, std::uint32_t u) {
+                if (cull) {
+                    const auto ring = topo.cached_two_ring(t);
+                    if (std::binary_search(ring.begin(), ring.end(), u)) {
+                        return;  // tested while seeding
+                    }
+                }
+                std::uint64_t count = 0;
+                test(t, u, corners(obj, t), count);
+                if (count != 0) {
+                    tests.fetch_add(count, std::memory_order_relaxed);
+                }
+            });
+        bests.finish();
+        work.exact_tests += tests.load();
     });
 }
 

@@ -46,6 +46,8 @@ private:
 // shares with the culler; the culler re-reads it after every call.
 using PairVisitor = FunctionRef<void(std::uint32_t, std::uint32_t)>;
 using TrianglePair = std::pair<std::uint32_t, std::uint32_t>;
+// The current squared distance bound of a triangle (for intra-object searches).
+using BoundLookup = FunctionRef<double(std::uint32_t)>;
 
 class Culler {
 public:
@@ -64,10 +66,12 @@ public:
     virtual void nearest_between(const Scene& scene, std::size_t a, std::size_t b,
                                  double& bound_sq, PairVisitor visit) const = 0;
 
-    // Calls visit(t, u) for triangles u of object a, not adjacent to t (sharing no vertex), that
-    // may be closer to t than sqrt(bound_sq). The visitor may lower bound_sq.
-    virtual void nearest_within(const Scene& scene, std::size_t a, std::uint32_t t,
-                                double& bound_sq, PairVisitor visit) const = 0;
+    // Calls visit(t, u), t < u, for every pair of object a's triangles that share no vertex and
+    // may be closer than the larger of their two current bounds (`bound_sq(t)`, which the visitor
+    // may lower as it goes). Bounds are read as the traversal proceeds; a stale (larger) bound
+    // only costs speed. May call `visit` from several threads at once.
+    virtual void self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
+                            PairVisitor visit) const = 0;
 
     // Appends every triangle pair that may be within `radius`: for a != b all pairs (ta, tb);
     // for a == b the non-adjacent pairs with ta < tb.

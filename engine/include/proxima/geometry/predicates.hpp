@@ -23,14 +23,14 @@ unsigned long long exact_fallback_count();
 // filter (the normal and its error-bound minors) computed once. Always returns exactly
 // orient3d(a, b, c, x); undecided queries go through orient3d itself.
 class PlaneSide {
-public:
+  public:
     PlaneSide(const Vec3& a, const Vec3& b, const Vec3& c);
     int operator()(const Vec3& x) const;
     // Also stores the floating-point value of ((b - a) x (c - a)) . (x - a), a height above the
     // plane scaled by the normal's length (its sign is -orient3d up to rounding).
     int operator()(const Vec3& x, double& height) const;
 
-private:
+  private:
     Vec3 m_a, m_b, m_c;
     Vec3 m_normal;  // (b - a) x (c - a) in floating point
     Vec3 m_minors;  // per axis, |u_j v_k| + |u_k v_j|: the permanent's factors
