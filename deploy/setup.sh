@@ -18,7 +18,7 @@ packages=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev libmetis-dev
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev
   libfcl-dev libbullet-dev
-  python3 python3-grpcio python3-numpy
+  python3 python3-grpcio python3-protobuf python3-numpy binutils
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
