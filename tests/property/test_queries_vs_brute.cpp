@@ -139,7 +139,9 @@ void expect_equal_answers(const Scene& scene, const QueryResult& bvh, const Quer
     for (const auto& p : brute.tolerance) {
         EXPECT_TRUE(std::binary_search(bvh.pns.begin(), bvh.pns.end(), p)) << where;
     }
-    EXPECT_LE(bvh.stats.exact_tests, brute.stats.exact_tests) << where;
+    // Culling never tests more pairs than brute force, except that a pair tested while seeding a
+    // triangle's self bound may be tested again (at most one per triangle).
+    EXPECT_LE(bvh.stats.exact_tests, brute.stats.exact_tests + scene.triangle_count()) << where;
 }
 
 // 2,000 random scenes in four shards (separate ctest entries, so they run in parallel).
