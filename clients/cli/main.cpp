@@ -1,13 +1,20 @@
-// proxima: the command-line tool. `distance --local` runs the engine in-process on mesh files;
-// `demo` streams a built-in deforming scene through the engine and prints per-frame results.
+// proxima: the command-line tool. `distance` runs the engine in-process on mesh files (--local,
+// the default) or on a proximad daemon (--server); `demo` streams a built-in deforming scene
+// through the engine, or through a daemon's frame stream, and prints per-frame results; `info`
+// shows what a daemon reports about itself. Both modes build the same QueryResult and print it
+// through the same code, so their outputs differ only in timings.
+#include <chrono>
 #include <cstdio>
 #include <exception>
 #include <iostream>
+#include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
+#include "client/proxima_client.hpp"
 #include "common/json_output.hpp"
 #include "common/local_scene.hpp"
 #include "proxima/query/query.hpp"
@@ -22,8 +29,23 @@ int fail(const Status& status) {
     return 1;
 }
 
+double milliseconds_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+        .count();
+}
+
+StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address,
+                                                  std::size_t inline_mesh_bytes = 1u << 20) {
+    client::ConnectOptions options;
+    // float64 vertices (the default) keep server answers bit-identical to local ones.
+    options.inline_mesh_bytes = inline_mesh_bytes;
+    return client::Client::connect(address, options);
+}
+
 struct DistanceArgs {
     bool local = false;
+    std::string server;
+    std::size_t inline_mesh_bytes = 1u << 20;
     bool split_components = false;
     bool self = false;
     bool collisions = false;
@@ -71,6 +93,106 @@ void print_text(const std::vector<client::InputObject>& objects, const QueryResu
                 r.stats.total_seconds * 1e3);
 }
 
+StatusOr<QueryResult> query_local(const std::vector<client::InputObject>& objects,
+                                  const QueryRequest& request) {
+    ProximityEngine engine;
+    SceneUpdate update;
+    for (const auto& obj : objects) {
+        update.additions.push_back(obj.mesh);
+    }
+    if (auto applied = engine.scene().apply(std::move(update)); !applied.ok()) {
+        return applied.status();
+    }
+    return engine.query(request);
+}
+
+// The printers index file triangle maps with the result's indices: a daemon answering with indices
+// outside the objects we sent must be an error message, not an out-of-range read.
+Status check_remote_result(const std::vector<client::InputObject>& objects,
+                           const client::FrameResponse& response, const QueryRequest& request) {
+    const auto n = objects.size();
+    auto bad = [](const std::string& what) {
+        return Status(StatusCode::internal, "the daemon's answer does not fit the input: " + what);
+    };
+    auto triangle_ok = [&](std::size_t object, std::uint32_t t) {
+        return object < n && t < objects[object].file_triangle.size();
+    };
+    if (response.object_ids.size() != n) {
+        return bad(std::to_string(response.object_ids.size()) + " objects for " +
+                   std::to_string(n) + " sent");
+    }
+    const auto& r = response.result;
+    if (request.separation && r.separation.size() != n) {
+        return bad("separation for " + std::to_string(r.separation.size()) + " objects");
+    }
+    for (std::size_t i = 0; i < r.separation.size(); ++i) {
+        const auto& s = r.separation[i];
+        if (s.other != NO_OBJECT && (!triangle_ok(i, s.triangle) ||
+                                     !triangle_ok(static_cast<std::size_t>(s.other),
+                                                  s.other_triangle))) {
+            return bad("separation of object " + std::to_string(i));
+        }
+    }
+    if (request.self && r.self.size() != n) {
+        return bad("self distances for " + std::to_string(r.self.size()) + " objects");
+    }
+    for (std::size_t i = 0; i < r.self.size(); ++i) {
+        if (r.self[i].size() != objects[i].file_triangle.size()) {
+            return bad("self distances of object " + std::to_string(i));
+        }
+        for (const auto& e : r.self[i]) {
+            if (e.closest != NO_OBJECT &&
+                !triangle_ok(i, static_cast<std::uint32_t>(e.closest))) {
+                return bad("self distances of object " + std::to_string(i));
+            }
+        }
+    }
+    for (const auto* pairs : {&r.collisions, &r.tolerance, &r.pns}) {
+        for (const auto& p : *pairs) {
+            if (!triangle_ok(p.object, p.triangle) || !triangle_ok(p.other, p.other_triangle)) {
+                return bad("a feature pair names a triangle that does not exist");
+            }
+        }
+    }
+    return {};
+}
+
+// Creates a scene on the daemon with the objects in input order, runs one Query and deletes the
+// scene: the daemon's scene order is the input order, so result indices mean the same as locally.
+StatusOr<QueryResult> query_remote(const DistanceArgs& args,
+                                   const std::vector<client::InputObject>& objects,
+                                   const QueryRequest& request) {
+    auto remote = connect(args.server, args.inline_mesh_bytes);
+    if (!remote.ok()) {
+        return remote.status();
+    }
+    auto& c = *remote.value();
+    std::vector<NamedMesh> meshes;
+    meshes.reserve(objects.size());
+    for (const auto& obj : objects) {
+        meshes.push_back(obj.mesh);
+    }
+    auto scene = c.create_scene("proxima distance", meshes);
+    if (!scene.ok()) {
+        return scene.status();
+    }
+    client::FrameRequest frame;
+    frame.queries = request;
+    auto response = c.query(scene->scene_id, frame);
+    if (auto deleted = c.delete_scene(scene->scene_id); !deleted.ok()) {
+        // The answer is still good; the stale scene is the daemon operator's to notice.
+        std::fprintf(stderr, "proxima: warning: could not delete scene %s: %s\n",
+                     scene->scene_id.c_str(), deleted.to_string().c_str());
+    }
+    if (!response.ok()) {
+        return response.status();
+    }
+    if (auto st = check_remote_result(objects, response.value(), request); !st.ok()) {
+        return st;
+    }
+    return std::move(response->result);
+}
+
 int run_distance(const DistanceArgs& args) {
     auto culler = parse_culler(args.culler);
     if (!culler.ok()) {
@@ -80,14 +202,6 @@ int run_distance(const DistanceArgs& args) {
     if (!objects.ok()) {
         return fail(objects.status());
     }
-    ProximityEngine engine;
-    SceneUpdate update;
-    for (const auto& obj : objects.value()) {
-        update.additions.push_back(obj.mesh);
-    }
-    if (auto applied = engine.scene().apply(std::move(update)); !applied.ok()) {
-        return fail(applied.status());
-    }
     QueryRequest request;
     request.self = args.self;
     request.collisions = args.collisions;
@@ -96,7 +210,8 @@ int run_distance(const DistanceArgs& args) {
     if (args.tolerance >= 0.0) {
         request.tolerance = args.tolerance;
     }
-    auto result = engine.query(request);
+    auto result = args.server.empty() ? query_local(objects.value(), request)
+                                      : query_remote(args, objects.value(), request);
     if (!result.ok()) {
         return fail(result.status());
     }
@@ -114,7 +229,239 @@ struct DemoArgs {
     std::size_t frames = 8;
     bool json = false;
     std::string culler = "auto";
+    std::string server;
 };
+
+// One demo frame's line. `round_trip_ms` is set in server mode only (send to result received).
+void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
+                      std::size_t triangles, const QueryResult& result,
+                      std::optional<double> round_trip_ms) {
+    double min_sep = std::numeric_limits<double>::infinity();
+    for (const auto& s : result.separation) {
+        min_sep = std::min(min_sep, s.distance);
+    }
+    double min_self = std::numeric_limits<double>::infinity();
+    for (const auto& obj : result.self) {
+        for (const auto& s : obj) {
+            min_self = std::min(min_self, s.distance);
+        }
+    }
+    const auto& st = result.stats;
+    if (args.json) {
+        nlohmann::json j = {{"frame", k},
+                            {"objects", objects},
+                            {"triangles", triangles},
+                            {"min_separation", std::isfinite(min_sep) ? nlohmann::json(min_sep)
+                                                                      : nlohmann::json()},
+                            {"min_self_distance", std::isfinite(min_self)
+                                                      ? nlohmann::json(min_self)
+                                                      : nlohmann::json()},
+                            {"collisions", result.collisions.size()},
+                            {"stats", client::stats_json(st)}};
+        if (round_trip_ms) {
+            j["round_trip_ms"] = *round_trip_ms;
+        }
+        std::cout << j.dump() << std::endl;  // one line per frame, as it completes
+        return;
+    }
+    std::printf("%5zu %7zu %9zu %12.6g %12.6g %10zu %12llu %9.2f", k, objects, triangles, min_sep,
+                min_self, result.collisions.size(),
+                static_cast<unsigned long long>(st.exact_tests), st.total_seconds * 1e3);
+    if (round_trip_ms) {
+        std::printf(" %9.2f", *round_trip_ms);
+    }
+    std::printf("\n");
+    // Lines go out as frames complete, also when stdout is a pipe (demo.sh, tee).
+    std::fflush(stdout);
+}
+
+void print_demo_header(const DemoArgs& args, const scenes::ProceduralScene& scene) {
+    if (args.json) {
+        return;
+    }
+    if (args.server.empty()) {
+        std::printf("scene %s: %s\n", scene.name.c_str(), scene.description.c_str());
+    } else {
+        std::printf("scene %s: %s\nstreamed to proximad at %s (ms: engine time on the daemon, "
+                    "rtt-ms: round trip)\n",
+                    scene.name.c_str(), scene.description.c_str(), args.server.c_str());
+    }
+    std::printf("%5s %7s %9s %12s %12s %10s %12s %9s", "frame", "objects", "triangles",
+                "min-separ.", "min-self", "collisions", "exact-tests", "ms");
+    if (!args.server.empty()) {
+        std::printf(" %9s", "rtt-ms");
+    }
+    std::printf("\n");
+}
+
+int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
+                   const QueryRequest& request) {
+    ProximityEngine engine;
+    SceneUpdate first;
+    first.additions = scene.initial;
+    if (auto r = engine.scene().apply(std::move(first)); !r.ok()) {
+        return fail(r.status());
+    }
+    print_demo_header(args, scene);
+    for (std::size_t k = 0; k < scene.frame_count; ++k) {
+        if (k > 0) {
+            if (auto r = engine.scene().apply(scene.step(k, engine.scene())); !r.ok()) {
+                return fail(r.status());
+            }
+        }
+        auto result = engine.query(request);
+        if (!result.ok()) {
+            return fail(result.status());
+        }
+        print_demo_frame(args, k, engine.scene().size(), engine.scene().triangle_count(),
+                         result.value(), std::nullopt);
+    }
+    return 0;
+}
+
+// Local mirror ids -> daemon ids. The procedural steps name objects by the ids of the Scene they
+// are given (our mirror); the daemon numbers its objects itself, so every id in an update is
+// translated, and the ids the daemon gives new objects are learned from each result.
+class IdMap {
+public:
+    StatusOr<ObjectId> remote(ObjectId local) const {
+        auto it = m_remote.find(local);
+        if (it == m_remote.end()) {
+            return Status(StatusCode::internal,
+                          "object " + std::to_string(local) + " has no daemon id");
+        }
+        return it->second;
+    }
+
+    StatusOr<SceneUpdate> translate(const SceneUpdate& local) const {
+        SceneUpdate out;
+        for (auto id : local.removals) {
+            auto r = remote(id);
+            if (!r.ok()) {
+                return r.status();
+            }
+            out.removals.push_back(r.value());
+        }
+        for (const auto& rep : local.replacements) {
+            auto r = remote(rep.object);
+            if (!r.ok()) {
+                return r.status();
+            }
+            out.replacements.push_back({r.value(), rep.fragments});
+        }
+        for (const auto& pos : local.positions) {
+            auto r = remote(pos.object);
+            if (!r.ok()) {
+                return r.status();
+            }
+            out.positions.push_back({r.value(), pos.vertices});
+        }
+        out.additions = local.additions;
+        return out;
+    }
+
+    // After a frame: forget removed and replaced objects, learn the new ones' ids.
+    Status update(const SceneUpdate& local_update, const SceneUpdateResult& local,
+                  const client::FrameResponse& remote) {
+        if (remote.added_ids.size() != local.added_ids.size() ||
+            remote.fragment_ids.size() != local.fragment_ids.size()) {
+            return {StatusCode::internal,
+                    "the daemon reported ids for " + std::to_string(remote.added_ids.size()) +
+                        " additions and " + std::to_string(remote.fragment_ids.size()) +
+                        " topology changes; the frame had " +
+                        std::to_string(local.added_ids.size()) + " and " +
+                        std::to_string(local.fragment_ids.size())};
+        }
+        for (auto id : local_update.removals) {
+            m_remote.erase(id);
+        }
+        for (const auto& rep : local_update.replacements) {
+            m_remote.erase(rep.object);
+        }
+        for (std::size_t i = 0; i < local.fragment_ids.size(); ++i) {
+            if (remote.fragment_ids[i].size() != local.fragment_ids[i].size()) {
+                return {StatusCode::internal, "the daemon reported " +
+                                                  std::to_string(remote.fragment_ids[i].size()) +
+                                                  " fragment ids for topology change " +
+                                                  std::to_string(i) + " of " +
+                                                  std::to_string(local.fragment_ids[i].size())};
+            }
+            for (std::size_t j = 0; j < local.fragment_ids[i].size(); ++j) {
+                m_remote[local.fragment_ids[i][j]] = remote.fragment_ids[i][j];
+            }
+        }
+        for (std::size_t i = 0; i < local.added_ids.size(); ++i) {
+            m_remote[local.added_ids[i]] = remote.added_ids[i];
+        }
+        return {};
+    }
+
+private:
+    std::unordered_map<ObjectId, ObjectId> m_remote;
+};
+
+// Streams the scene over one StreamFrames call, in lockstep (send a frame, read its result) so
+// that the round trip of each frame is measured alone. The scene is stream-owned: the first frame
+// creates it from its additions and the daemon deletes it when the stream ends.
+int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
+                    const QueryRequest& request) {
+    auto remote = connect(args.server);
+    if (!remote.ok()) {
+        return fail(remote.status());
+    }
+    auto stream = remote.value()->open_stream("");
+    if (!stream.ok()) {
+        return fail(stream.status());
+    }
+    auto& frames = *stream.value();
+    Scene mirror;
+    IdMap ids;
+    print_demo_header(args, scene);
+    for (std::size_t k = 0; k < scene.frame_count; ++k) {
+        SceneUpdate local_update;
+        if (k == 0) {
+            local_update.additions = scene.initial;
+        } else {
+            local_update = scene.step(k, mirror);
+        }
+        client::FrameRequest frame;
+        frame.frame = k;
+        frame.queries = request;
+        auto translated = ids.translate(local_update);
+        if (!translated.ok()) {
+            return fail(translated.status());
+        }
+        frame.update = std::move(translated).value();
+        // The mirror keeps the whole update (ids, fragments) for the id bookkeeping below.
+        auto applied = mirror.apply(local_update);
+        if (!applied.ok()) {
+            return fail(applied.status());
+        }
+        const auto start = std::chrono::steady_clock::now();
+        if (auto sent = frames.send(frame); !sent.ok()) {
+            return fail(sent);
+        }
+        auto response = frames.receive();
+        if (!response.ok()) {
+            return fail(response.status());
+        }
+        const double round_trip_ms = milliseconds_since(start);
+        if (auto st = ids.update(local_update, applied.value(), response.value()); !st.ok()) {
+            return fail(st);
+        }
+        if (response->object_ids.size() != mirror.size()) {
+            return fail({StatusCode::internal,
+                         "the daemon's scene has " + std::to_string(response->object_ids.size()) +
+                             " objects, the local mirror " + std::to_string(mirror.size())});
+        }
+        print_demo_frame(args, k, mirror.size(), mirror.triangle_count(), response->result,
+                         round_trip_ms);
+    }
+    if (auto st = frames.finish(); !st.ok()) {
+        return fail(st);
+    }
+    return 0;
+}
 
 int run_demo(const DemoArgs& args) {
     auto culler = parse_culler(args.culler);
@@ -126,61 +473,60 @@ int run_demo(const DemoArgs& args) {
         return fail(invalid_argument("unknown scene '" + args.scene +
                                      "' (expected skirt, cloth-ball, bowl, ramps or breaking)"));
     }
-    ProximityEngine engine;
-    SceneUpdate first;
-    first.additions = scene.initial;
-    if (auto r = engine.scene().apply(std::move(first)); !r.ok()) {
-        return fail(r.status());
-    }
-    if (!args.json) {
-        std::printf("scene %s: %s\n", scene.name.c_str(), scene.description.c_str());
-        std::printf("%5s %7s %9s %12s %12s %10s %12s %9s\n", "frame", "objects", "triangles",
-                    "min-separ.", "min-self", "collisions", "exact-tests", "ms");
-    }
     QueryRequest request;
     request.self = true;
     request.collisions = true;
     request.culler = culler.value();
-    for (std::size_t k = 0; k < scene.frame_count; ++k) {
-        if (k > 0) {
-            if (auto r = engine.scene().apply(scene.step(k, engine.scene())); !r.ok()) {
-                return fail(r.status());
-            }
-        }
-        auto result = engine.query(request);
-        if (!result.ok()) {
-            return fail(result.status());
-        }
-        double min_sep = std::numeric_limits<double>::infinity();
-        for (const auto& s : result->separation) {
-            min_sep = std::min(min_sep, s.distance);
-        }
-        double min_self = std::numeric_limits<double>::infinity();
-        for (const auto& obj : result->self) {
-            for (const auto& s : obj) {
-                min_self = std::min(min_self, s.distance);
-            }
-        }
-        const auto& st = result->stats;
-        if (args.json) {
-            nlohmann::json j = {{"frame", k},
-                                {"objects", engine.scene().size()},
-                                {"triangles", engine.scene().triangle_count()},
-                                {"min_separation", std::isfinite(min_sep) ? nlohmann::json(min_sep)
-                                                                          : nlohmann::json()},
-                                {"min_self_distance", std::isfinite(min_self)
-                                                          ? nlohmann::json(min_self)
-                                                          : nlohmann::json()},
-                                {"collisions", result->collisions.size()},
-                                {"stats", client::stats_json(st)}};
-            std::cout << j.dump() << '\n';
-        } else {
-            std::printf("%5zu %7zu %9zu %12.6g %12.6g %10zu %12llu %9.2f\n", k,
-                        engine.scene().size(), engine.scene().triangle_count(), min_sep, min_self,
-                        result->collisions.size(), static_cast<unsigned long long>(st.exact_tests),
-                        st.total_seconds * 1e3);
-        }
+    return args.server.empty() ? run_demo_local(args, scene, request)
+                               : run_demo_remote(args, scene, request);
+}
+
+struct InfoArgs {
+    std::string server;
+    bool json = false;
+};
+
+int run_info(const InfoArgs& args) {
+    auto remote = connect(args.server);
+    if (!remote.ok()) {
+        return fail(remote.status());
     }
+    auto info = remote.value()->server_info();
+    if (!info.ok()) {
+        return fail(info.status());
+    }
+    const auto& i = info.value();
+    if (args.json) {
+        nlohmann::json j = {{"address", args.server},
+                            {"version", i.version},
+                            {"api", i.api},
+                            {"proximity_backend", i.proximity_backend},
+                            {"gl_renderer", i.gl_renderer},
+                            {"live_scenes", i.live_scenes},
+                            {"live_streams", i.live_streams},
+                            {"limits",
+                             {{"max_scenes", i.max_scenes},
+                              {"max_objects_per_scene", i.max_objects_per_scene},
+                              {"max_triangles_per_scene", i.max_triangles_per_scene},
+                              {"max_message_bytes", i.max_message_bytes},
+                              {"max_frames_in_flight", i.max_frames_in_flight}}}};
+        std::cout << j.dump() << '\n';
+        return 0;
+    }
+    std::printf("proximad %s at %s (api %s)\n", i.version.c_str(), args.server.c_str(),
+                i.api.c_str());
+    std::printf("proximity backend: %s\n", i.proximity_backend.c_str());
+    std::printf("gl renderer:       %s\n",
+                i.gl_renderer.empty() ? "(none)" : i.gl_renderer.c_str());
+    std::printf("live:              %llu scenes, %llu streams\n",
+                static_cast<unsigned long long>(i.live_scenes),
+                static_cast<unsigned long long>(i.live_streams));
+    std::printf("limits:            %llu scenes, %llu objects and %llu triangles per scene, "
+                "%llu-byte messages, %u frames in flight per stream\n",
+                static_cast<unsigned long long>(i.max_scenes),
+                static_cast<unsigned long long>(i.max_objects_per_scene),
+                static_cast<unsigned long long>(i.max_triangles_per_scene),
+                static_cast<unsigned long long>(i.max_message_bytes), i.max_frames_in_flight);
     return 0;
 }
 
@@ -195,7 +541,18 @@ int main(int argc, char** argv) {
         DistanceArgs dist;
         auto* distance = app.add_subcommand(
             "distance", "Separation, self distance, collisions and tolerance on mesh files");
-        distance->add_flag("--local", dist.local, "Run the engine in this process (the default)");
+        auto* local_flag = distance->add_flag(
+            "--local", dist.local, "Run the engine in this process (the default)");
+        auto* server_opt =
+            distance->add_option("--server", dist.server,
+                                 "Run on the proximad daemon at HOST:PORT instead");
+        server_opt->excludes(local_flag);
+        distance
+            ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
+                         "With --server: objects beyond this many bytes (in all) are uploaded "
+                         "in chunks instead of inline")
+            ->capture_default_str()
+            ->needs(server_opt);
         distance->add_flag("--split-components", dist.split_components,
                            "Make each connected component of a file an object");
         distance->add_flag("--self", dist.self,
@@ -222,7 +579,14 @@ int main(int argc, char** argv) {
             ->check(CLI::Range(1, 100000));
         demo->add_option("--culler", demo_args.culler, "auto, brute or bvh")
             ->check(CLI::IsMember({"auto", "brute", "bvh"}));
+        demo->add_option("--server", demo_args.server,
+                         "Stream the frames to the proximad daemon at HOST:PORT");
         demo->add_flag("--json", demo_args.json, "One JSON object per frame");
+
+        InfoArgs info_args;
+        auto* info = app.add_subcommand("info", "Show a proximad daemon's version and limits");
+        info->add_option("--server", info_args.server, "The daemon's HOST:PORT")->required();
+        info->add_flag("--json", info_args.json, "Print one JSON object");
 
         CLI11_PARSE(app, argc, argv);
         if (*version) {
@@ -234,6 +598,9 @@ int main(int argc, char** argv) {
         }
         if (*demo) {
             return run_demo(demo_args);
+        }
+        if (*info) {
+            return run_info(info_args);
         }
         return 2;
     } catch (const std::bad_alloc&) {

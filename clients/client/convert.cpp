@@ -1,0 +1,576 @@
+#include "client/convert.hpp"
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+
+namespace proxima::client::detail {
+
+namespace {
+
+static_assert(sizeof(Vec3) == 3 * sizeof(double) && std::is_standard_layout_v<Vec3>,
+              "Vec3 must be three packed doubles for the float64 fast path");
+static_assert(sizeof(TriangleIndices) == TRIANGLE_BYTES);
+
+constexpr bool LITTLE_ENDIAN_HOST = std::endian::native == std::endian::little;
+
+// Writes `value` little-endian at dst, whatever the host's byte order.
+template <class T>
+void store_le(char* dst, T value) {
+    using U = std::conditional_t<sizeof(T) == 8, std::uint64_t, std::uint32_t>;
+    auto bits = std::bit_cast<U>(value);
+    for (std::size_t i = 0; i < sizeof(U); ++i) {
+        dst[i] = static_cast<char>(static_cast<unsigned char>(bits >> (8 * i)));
+    }
+}
+
+template <class T>
+T load_le(const char* src) {
+    using U = std::conditional_t<sizeof(T) == 8, std::uint64_t, std::uint32_t>;
+    U bits = 0;
+    for (std::size_t i = 0; i < sizeof(U); ++i) {
+        bits |= static_cast<U>(static_cast<unsigned char>(src[i])) << (8 * i);
+    }
+    return std::bit_cast<T>(bits);
+}
+
+Status malformed(const std::string& what) {
+    return {StatusCode::internal, "malformed FrameResult from the server: " + what};
+}
+
+void encode_vec3(const Vec3& v, pb::Vec3* out) {
+    out->set_x(v.x);
+    out->set_y(v.y);
+    out->set_z(v.z);
+}
+
+Vec3 decode_vec3(const pb::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+void encode_pairs(const std::vector<FeaturePair>& pairs,
+                  google::protobuf::RepeatedPtrField<pb::FeaturePair>* out) {
+    out->Reserve(static_cast<int>(pairs.size()));
+    for (const auto& p : pairs) {
+        auto* q = out->Add();
+        q->set_object(p.object);
+        q->set_triangle(p.triangle);
+        q->set_other(p.other);
+        q->set_other_triangle(p.other_triangle);
+        q->set_distance(p.distance);
+    }
+}
+
+Status decode_pairs(const google::protobuf::RepeatedPtrField<pb::FeaturePair>& pairs,
+                    std::size_t object_count, const char* what, std::vector<FeaturePair>& out) {
+    out.reserve(static_cast<std::size_t>(pairs.size()));
+    for (const auto& q : pairs) {
+        if (q.object() >= object_count || q.other() >= object_count) {
+            return malformed(std::string(what) + " pair names object " +
+                             std::to_string(std::max(q.object(), q.other())) + " of " +
+                             std::to_string(object_count));
+        }
+        out.push_back({q.object(), q.triangle(), q.other(), q.other_triangle(), q.distance()});
+    }
+    return {};
+}
+
+}  // namespace
+
+Status from_grpc(const grpc::Status& status) {
+    switch (status.error_code()) {
+        case grpc::StatusCode::OK: return {};
+        case grpc::StatusCode::INVALID_ARGUMENT:
+            return {StatusCode::invalid_argument, status.error_message()};
+        case grpc::StatusCode::NOT_FOUND: return {StatusCode::not_found, status.error_message()};
+        case grpc::StatusCode::FAILED_PRECONDITION:
+            return {StatusCode::failed_precondition, status.error_message()};
+        case grpc::StatusCode::RESOURCE_EXHAUSTED:
+            return {StatusCode::resource_exhausted, status.error_message()};
+        case grpc::StatusCode::CANCELLED: return {StatusCode::cancelled, status.error_message()};
+        case grpc::StatusCode::DEADLINE_EXCEEDED:
+            return {StatusCode::deadline_exceeded, status.error_message()};
+        case grpc::StatusCode::UNAVAILABLE:
+            return {StatusCode::unavailable, status.error_message()};
+        case grpc::StatusCode::INTERNAL: return {StatusCode::internal, status.error_message()};
+        default: break;
+    }
+    const char* name = "UNKNOWN";
+    switch (status.error_code()) {
+        case grpc::StatusCode::ALREADY_EXISTS: name = "ALREADY_EXISTS"; break;
+        case grpc::StatusCode::PERMISSION_DENIED: name = "PERMISSION_DENIED"; break;
+        case grpc::StatusCode::ABORTED: name = "ABORTED"; break;
+        case grpc::StatusCode::OUT_OF_RANGE: name = "OUT_OF_RANGE"; break;
+        case grpc::StatusCode::UNIMPLEMENTED: name = "UNIMPLEMENTED"; break;
+        case grpc::StatusCode::DATA_LOSS: name = "DATA_LOSS"; break;
+        case grpc::StatusCode::UNAUTHENTICATED: name = "UNAUTHENTICATED"; break;
+        default: break;
+    }
+    return {StatusCode::internal, std::string("gRPC ") + name + ": " + status.error_message()};
+}
+
+grpc::Status to_grpc(const Status& status) {
+    grpc::StatusCode code = grpc::StatusCode::INTERNAL;
+    switch (status.code()) {
+        case StatusCode::ok: return grpc::Status::OK;
+        case StatusCode::invalid_argument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
+        case StatusCode::not_found: code = grpc::StatusCode::NOT_FOUND; break;
+        case StatusCode::failed_precondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
+        case StatusCode::resource_exhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
+        case StatusCode::cancelled: code = grpc::StatusCode::CANCELLED; break;
+        case StatusCode::deadline_exceeded: code = grpc::StatusCode::DEADLINE_EXCEEDED; break;
+        case StatusCode::unavailable: code = grpc::StatusCode::UNAVAILABLE; break;
+        case StatusCode::internal: code = grpc::StatusCode::INTERNAL; break;
+    }
+    return {code, status.message()};
+}
+
+pb::ScalarType scalar_type(bool float32) {
+    return float32 ? pb::SCALAR_TYPE_FLOAT32 : pb::SCALAR_TYPE_FLOAT64;
+}
+
+std::size_t vertex_bytes(pb::ScalarType type) {
+    switch (type) {
+        case pb::SCALAR_TYPE_FLOAT32: return FLOAT32_VERTEX_BYTES;
+        case pb::SCALAR_TYPE_FLOAT64: return FLOAT64_VERTEX_BYTES;
+        default: return 0;
+    }
+}
+
+std::string pack_vertices(std::span<const Vec3> vertices, bool float32) {
+    std::string out;
+    if (!float32) {
+        out.resize(vertices.size() * FLOAT64_VERTEX_BYTES);
+        if constexpr (LITTLE_ENDIAN_HOST) {
+            // The wire format is the host's memory layout here: one copy, no per-value work.
+            if (!vertices.empty()) {
+                std::memcpy(out.data(), vertices.data(), out.size());
+            }
+        } else {
+            char* p = out.data();
+            for (const auto& v : vertices) {
+                store_le(p, v.x);
+                store_le(p + 8, v.y);
+                store_le(p + 16, v.z);
+                p += FLOAT64_VERTEX_BYTES;
+            }
+        }
+        return out;
+    }
+    out.resize(vertices.size() * FLOAT32_VERTEX_BYTES);
+    char* p = out.data();
+    for (const auto& v : vertices) {
+        store_le(p, static_cast<float>(v.x));
+        store_le(p + 4, static_cast<float>(v.y));
+        store_le(p + 8, static_cast<float>(v.z));
+        p += FLOAT32_VERTEX_BYTES;
+    }
+    return out;
+}
+
+std::string pack_triangles(std::span<const TriangleIndices> triangles) {
+    std::string out(triangles.size() * TRIANGLE_BYTES, '\0');
+    if constexpr (LITTLE_ENDIAN_HOST) {
+        if (!triangles.empty()) {
+            std::memcpy(out.data(), triangles.data(), out.size());
+        }
+    } else {
+        char* p = out.data();
+        for (const auto& t : triangles) {
+            for (int k = 0; k < 3; ++k) {
+                store_le(p + 4 * k, t[static_cast<std::size_t>(k)]);
+            }
+            p += TRIANGLE_BYTES;
+        }
+    }
+    return out;
+}
+
+StatusOr<std::vector<Vec3>> unpack_vertices(pb::ScalarType type, const std::string& data,
+                                            const std::string& what) {
+    const std::size_t stride = vertex_bytes(type);
+    if (stride == 0) {
+        return invalid_argument(what + ": vertex buffer scalar type " + std::to_string(type) +
+                                " is not FLOAT32 or FLOAT64");
+    }
+    if (data.size() % stride != 0) {
+        return invalid_argument(what + ": vertex buffer of " + std::to_string(data.size()) +
+                                " bytes is not a whole number of " + std::to_string(stride) +
+                                "-byte vertices");
+    }
+    std::vector<Vec3> out(data.size() / stride);
+    if (stride == FLOAT64_VERTEX_BYTES) {
+        if constexpr (LITTLE_ENDIAN_HOST) {
+            if (!out.empty()) {
+                std::memcpy(out.data(), data.data(), data.size());
+            }
+            return out;
+        }
+        const char* p = data.data();
+        for (auto& v : out) {
+            v = {load_le<double>(p), load_le<double>(p + 8), load_le<double>(p + 16)};
+            p += stride;
+        }
+        return out;
+    }
+    const char* p = data.data();
+    for (auto& v : out) {
+        v = {load_le<float>(p), load_le<float>(p + 4), load_le<float>(p + 8)};
+        p += stride;
+    }
+    return out;
+}
+
+StatusOr<std::vector<Vec3>> unpack_vertices(const pb::VertexBuffer& buffer,
+                                            const std::string& what) {
+    return unpack_vertices(buffer.type(), buffer.data(), what);
+}
+
+StatusOr<std::vector<TriangleIndices>> unpack_triangles(const std::string& data,
+                                                        const std::string& what) {
+    if (data.size() % TRIANGLE_BYTES != 0) {
+        return invalid_argument(what + ": index buffer of " + std::to_string(data.size()) +
+                                " bytes is not a whole number of 12-byte triangles");
+    }
+    std::vector<TriangleIndices> out(data.size() / TRIANGLE_BYTES);
+    if constexpr (LITTLE_ENDIAN_HOST) {
+        if (!out.empty()) {
+            std::memcpy(out.data(), data.data(), data.size());
+        }
+    } else {
+        const char* p = data.data();
+        for (auto& t : out) {
+            t = {load_le<std::uint32_t>(p), load_le<std::uint32_t>(p + 4),
+                 load_le<std::uint32_t>(p + 8)};
+            p += TRIANGLE_BYTES;
+        }
+    }
+    return out;
+}
+
+std::size_t encoded_mesh_bytes(const NamedMesh& mesh, bool float32) {
+    // 32 bytes covers the tags and varint lengths of the mesh and its three fields.
+    return mesh.name.size() +
+           mesh.mesh.vertices.size() * (float32 ? FLOAT32_VERTEX_BYTES : FLOAT64_VERTEX_BYTES) +
+           mesh.mesh.triangles.size() * TRIANGLE_BYTES + 32;
+}
+
+void encode_mesh(const NamedMesh& mesh, bool float32, pb::Mesh* out) {
+    out->set_name(mesh.name);
+    out->mutable_vertices()->set_type(scalar_type(float32));
+    out->mutable_vertices()->set_data(pack_vertices(mesh.mesh.vertices, float32));
+    out->set_indices(pack_triangles(mesh.mesh.triangles));
+}
+
+StatusOr<NamedMesh> decode_mesh(const pb::Mesh& mesh, const std::string& what) {
+    const std::string who = mesh.name().empty() ? what : what + " '" + mesh.name() + "'";
+    auto vertices = unpack_vertices(mesh.vertices(), who);
+    if (!vertices.ok()) {
+        return vertices.status();
+    }
+    auto triangles = unpack_triangles(mesh.indices(), who);
+    if (!triangles.ok()) {
+        return triangles.status();
+    }
+    NamedMesh out;
+    out.name = mesh.name();
+    out.mesh.vertices = std::move(vertices).value();
+    out.mesh.triangles = std::move(triangles).value();
+    return out;
+}
+
+void encode_query(const QueryRequest& request, bool self_points, pb::QuerySpec* out) {
+    out->set_separation(request.separation);
+    out->set_self(request.self);
+    out->set_collisions(request.collisions);
+    if (request.tolerance) {
+        out->set_tolerance(*request.tolerance);
+    }
+    out->set_pns(request.pns);
+    switch (request.culler) {
+        case CullerKind::automatic: out->set_culler(pb::CULLER_AUTO); break;
+        case CullerKind::brute: out->set_culler(pb::CULLER_BRUTE); break;
+        case CullerKind::bvh: out->set_culler(pb::CULLER_BVH); break;
+    }
+    out->set_self_points(self_points);
+}
+
+StatusOr<QueryRequest> decode_query(const pb::QuerySpec& spec) {
+    QueryRequest out;
+    out.separation = spec.separation();
+    out.self = spec.self();
+    out.collisions = spec.collisions();
+    if (spec.has_tolerance()) {
+        out.tolerance = spec.tolerance();
+    }
+    out.pns = spec.pns();
+    switch (spec.culler()) {
+        case pb::CULLER_AUTO: out.culler = CullerKind::automatic; break;
+        case pb::CULLER_BRUTE: out.culler = CullerKind::brute; break;
+        case pb::CULLER_BVH: out.culler = CullerKind::bvh; break;
+        default:
+            return invalid_argument("unknown culler " + std::to_string(spec.culler()) +
+                                    " (expected CULLER_AUTO, CULLER_BRUTE or CULLER_BVH)");
+    }
+    return out;
+}
+
+void encode_frame(const FrameRequest& frame, const std::string& scene_id, bool float32,
+                  pb::Frame* out) {
+    const auto& u = frame.update;
+    out->set_scene_id(scene_id);
+    out->set_frame(frame.frame);
+    out->mutable_positions()->Reserve(static_cast<int>(u.positions.size()));
+    for (const auto& p : u.positions) {
+        auto* q = out->add_positions();
+        q->set_object_id(p.object);
+        q->mutable_vertices()->set_type(scalar_type(float32));
+        q->mutable_vertices()->set_data(pack_vertices(p.vertices, float32));
+    }
+    for (const auto& r : u.replacements) {
+        auto* q = out->add_topology_changes();
+        q->set_object_id(r.object);
+        for (const auto& f : r.fragments) {
+            encode_mesh(f, float32, q->add_fragments());
+        }
+    }
+    for (const auto& a : u.additions) {
+        encode_mesh(a, float32, out->add_additions());
+    }
+    out->mutable_removals()->Add(u.removals.begin(), u.removals.end());
+    encode_query(frame.queries, frame.self_points, out->mutable_queries());
+}
+
+StatusOr<FrameRequest> decode_frame(const pb::Frame& frame) {
+    FrameRequest out;
+    out.frame = frame.frame();
+    auto& u = out.update;
+    for (const auto& p : frame.positions()) {
+        auto vertices =
+            unpack_vertices(p.vertices(), "positions of object " + std::to_string(p.object_id()));
+        if (!vertices.ok()) {
+            return vertices.status();
+        }
+        u.positions.push_back({p.object_id(), std::move(vertices).value()});
+    }
+    for (const auto& t : frame.topology_changes()) {
+        SceneUpdate::Replacement r;
+        r.object = t.object_id();
+        for (int i = 0; i < t.fragments_size(); ++i) {
+            auto mesh = decode_mesh(t.fragments(i), "fragment " + std::to_string(i) +
+                                                        " of object " +
+                                                        std::to_string(t.object_id()));
+            if (!mesh.ok()) {
+                return mesh.status();
+            }
+            r.fragments.push_back(std::move(mesh).value());
+        }
+        u.replacements.push_back(std::move(r));
+    }
+    for (int i = 0; i < frame.additions_size(); ++i) {
+        auto mesh = decode_mesh(frame.additions(i), "addition " + std::to_string(i));
+        if (!mesh.ok()) {
+            return mesh.status();
+        }
+        u.additions.push_back(std::move(mesh).value());
+    }
+    u.removals.assign(frame.removals().begin(), frame.removals().end());
+    auto queries = decode_query(frame.queries());
+    if (!queries.ok()) {
+        return queries.status();
+    }
+    out.queries = queries.value();
+    out.self_points = frame.queries().self_points();
+    return out;
+}
+
+StatusOr<FrameResponse> decode_result(const pb::FrameResult& result) {
+    FrameResponse out;
+    out.scene_id = result.scene_id();
+    out.frame = result.frame();
+    out.object_ids.assign(result.object_ids().begin(), result.object_ids().end());
+    out.added_ids.assign(result.added_ids().begin(), result.added_ids().end());
+    for (const auto& f : result.fragment_ids()) {
+        out.fragment_ids.emplace_back(f.ids().begin(), f.ids().end());
+    }
+    const std::size_t n = out.object_ids.size();
+    auto& r = out.result;
+
+    if (result.separation_size() != 0 && static_cast<std::size_t>(result.separation_size()) != n) {
+        return malformed(std::to_string(result.separation_size()) + " separations for " +
+                         std::to_string(n) + " objects");
+    }
+    r.separation.reserve(n);
+    for (const auto& s : result.separation()) {
+        Separation e;
+        if (s.has_other()) {
+            if (s.other() >= n) {
+                return malformed("separation names object " + std::to_string(s.other()) + " of " +
+                                 std::to_string(n));
+            }
+            e.other = s.other();
+            e.distance = s.distance();
+        }  // else: alone in the scene, the engine's "no other" (distance +inf)
+        e.triangle = s.triangle();
+        e.other_triangle = s.other_triangle();
+        e.point = decode_vec3(s.point());
+        e.other_point = decode_vec3(s.other_point());
+        r.separation.push_back(e);
+    }
+
+    if (result.self_size() != 0 && static_cast<std::size_t>(result.self_size()) != n) {
+        return malformed(std::to_string(result.self_size()) + " self lists for " +
+                         std::to_string(n) + " objects");
+    }
+    r.self.reserve(n);
+    for (int i = 0; i < result.self_size(); ++i) {
+        const auto& s = result.self(i);
+        const auto count = static_cast<std::size_t>(s.closest_size());
+        if (static_cast<std::size_t>(s.distance_size()) != count ||
+            (s.points_size() != 0 && static_cast<std::size_t>(s.points_size()) != 6 * count)) {
+            return malformed("self list of object " + std::to_string(i) + " has " +
+                             std::to_string(count) + " closest, " +
+                             std::to_string(s.distance_size()) + " distances and " +
+                             std::to_string(s.points_size()) + " point coordinates");
+        }
+        std::vector<SelfDistance> list(count);
+        for (std::size_t t = 0; t < count; ++t) {
+            auto& e = list[t];
+            const auto closest = s.closest(static_cast<int>(t));
+            if (closest < NO_OBJECT) {
+                return malformed("self entry " + std::to_string(t) + " of object " +
+                                 std::to_string(i) + " has closest " + std::to_string(closest));
+            }
+            e.closest = closest;
+            e.distance = s.distance(static_cast<int>(t));
+            if (s.points_size() != 0) {
+                const double* p = s.points().data() + 6 * t;
+                e.point = {p[0], p[1], p[2]};
+                e.other_point = {p[3], p[4], p[5]};
+            }
+        }
+        r.self.push_back(std::move(list));
+    }
+
+    if (auto st = decode_pairs(result.collisions(), n, "collision", r.collisions); !st.ok()) {
+        return st;
+    }
+    if (auto st = decode_pairs(result.tolerance(), n, "tolerance", r.tolerance); !st.ok()) {
+        return st;
+    }
+    if (auto st = decode_pairs(result.pns(), n, "PNS", r.pns); !st.ok()) {
+        return st;
+    }
+
+    const auto& s = result.stats();
+    auto& q = r.stats;
+    q.culler = s.culler();
+    q.prepare_seconds = s.prepare_seconds();
+    q.broad_phase_seconds = s.broad_phase_seconds();
+    q.separation_seconds = s.separation_seconds();
+    q.self_seconds = s.self_seconds();
+    q.collision_seconds = s.collision_seconds();
+    q.tolerance_seconds = s.tolerance_seconds();
+    q.total_seconds = s.total_seconds();
+    q.exact_tests = s.exact_tests();
+    q.brute_force_tests = s.brute_force_tests();
+    q.object_pairs_tested = s.object_pairs_tested();
+    q.pns_pairs = s.pns_pairs();
+    out.server_seconds = s.server_seconds();
+    return out;
+}
+
+void encode_result(const FrameResponse& response, bool self_points, pb::FrameResult* out) {
+    out->set_scene_id(response.scene_id);
+    out->set_frame(response.frame);
+    out->mutable_object_ids()->Add(response.object_ids.begin(), response.object_ids.end());
+    out->mutable_added_ids()->Add(response.added_ids.begin(), response.added_ids.end());
+    for (const auto& f : response.fragment_ids) {
+        out->add_fragment_ids()->mutable_ids()->Add(f.begin(), f.end());
+    }
+    const auto& r = response.result;
+    for (const auto& s : r.separation) {
+        auto* e = out->add_separation();
+        e->set_has_other(s.other != NO_OBJECT);
+        e->set_other(s.other == NO_OBJECT ? 0u : static_cast<std::uint32_t>(s.other));
+        e->set_triangle(s.triangle);
+        e->set_other_triangle(s.other_triangle);
+        e->set_distance(s.distance);
+        encode_vec3(s.point, e->mutable_point());
+        encode_vec3(s.other_point, e->mutable_other_point());
+    }
+    for (const auto& list : r.self) {
+        auto* e = out->add_self();
+        e->mutable_closest()->Reserve(static_cast<int>(list.size()));
+        e->mutable_distance()->Reserve(static_cast<int>(list.size()));
+        for (const auto& s : list) {
+            e->add_closest(s.closest);
+            e->add_distance(s.distance);
+        }
+        if (self_points) {
+            e->mutable_points()->Reserve(static_cast<int>(6 * list.size()));
+            for (const auto& s : list) {
+                for (const auto& p : {s.point, s.other_point}) {
+                    e->add_points(p.x);
+                    e->add_points(p.y);
+                    e->add_points(p.z);
+                }
+            }
+        }
+    }
+    encode_pairs(r.collisions, out->mutable_collisions());
+    encode_pairs(r.tolerance, out->mutable_tolerance());
+    encode_pairs(r.pns, out->mutable_pns());
+    auto* s = out->mutable_stats();
+    const auto& q = r.stats;
+    s->set_culler(q.culler);
+    s->set_prepare_seconds(q.prepare_seconds);
+    s->set_broad_phase_seconds(q.broad_phase_seconds);
+    s->set_separation_seconds(q.separation_seconds);
+    s->set_self_seconds(q.self_seconds);
+    s->set_collision_seconds(q.collision_seconds);
+    s->set_tolerance_seconds(q.tolerance_seconds);
+    s->set_total_seconds(q.total_seconds);
+    s->set_exact_tests(q.exact_tests);
+    s->set_brute_force_tests(q.brute_force_tests);
+    s->set_object_pairs_tested(q.object_pairs_tested);
+    s->set_pns_pairs(q.pns_pairs);
+    s->set_server_seconds(response.server_seconds);
+}
+
+RemoteServerInfo decode_server_info(const pb::ServerInfo& info) {
+    RemoteServerInfo out;
+    out.version = info.version();
+    out.api = info.api();
+    out.proximity_backend = info.proximity_backend();
+    out.gl_renderer = info.gl_renderer();
+    out.live_scenes = info.live_scenes();
+    out.live_streams = info.live_streams();
+    const auto& l = info.limits();
+    out.max_scenes = l.max_scenes();
+    out.max_objects_per_scene = l.max_objects_per_scene();
+    out.max_triangles_per_scene = l.max_triangles_per_scene();
+    out.max_message_bytes = l.max_message_bytes();
+    out.max_frames_in_flight = l.max_frames_in_flight();
+    return out;
+}
+
+RemoteObject decode_object(const pb::ObjectInfo& info) {
+    return {info.id(), info.name(), info.vertex_count(), info.triangle_count()};
+}
+
+RemoteScene decode_scene(const pb::SceneInfo& info) {
+    RemoteScene out;
+    out.scene_id = info.scene_id();
+    out.name = info.name();
+    out.objects.reserve(static_cast<std::size_t>(info.objects_size()));
+    for (const auto& o : info.objects()) {
+        out.objects.push_back(decode_object(o));
+    }
+    out.frames = info.frames();
+    out.triangle_count = info.triangle_count();
+    return out;
+}
+
+}  // namespace proxima::client::detail

@@ -1,0 +1,52 @@
+#pragma once
+// The daemon's configuration: defaults, an optional JSON file (`--config FILE`) and command-line
+// flags, in that order of precedence (a flag given on the command line beats the file). Every
+// option and its default is documented in docs/server.md; keep the two in step.
+
+#include <cstdint>
+#include <string>
+#include <variant>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "proxima/status.hpp"
+
+namespace proxima::server {
+
+// Limits protect the daemon from one client's mistakes. A request that would exceed one is
+// rejected whole with RESOURCE_EXHAUSTED naming the limit, before anything changes.
+struct Limits {
+    std::uint64_t max_scenes = 64;                     // live scenes, stream-owned ones included
+    std::uint64_t max_objects_per_scene = 100'000;
+    std::uint64_t max_triangles_per_scene = 50'000'000;
+    std::uint64_t max_message_bytes = 256ull << 20;    // each direction; gRPC's own check
+    std::uint32_t max_frames_in_flight = 4;            // per stream: read but not yet answered
+};
+
+struct ServerConfig {
+    // HOST:PORT; loopback by default so that a daemon started by hand is not exposed. Port 0
+    // picks a free port (printed on the first line of standard output).
+    std::string listen = "127.0.0.1:50051";
+    Limits limits;
+    // How long a SIGTERM/SIGINT waits for in-flight calls before cancelling them.
+    double drain_seconds = 10.0;
+    std::string log_level = "info";
+    // Threads that run engine work off gRPC's callback threads; 0 picks max(4, hardware threads).
+    // Each query also uses oneTBB's threads for its own parallel loops.
+    unsigned worker_threads = 0;
+};
+
+// Overlays the keys of a JSON object onto `base`. Keys are the long flag names without the
+// leading dashes ("max-scenes"); an unknown key, a wrong type or an out-of-range value is an
+// invalid_argument status naming the key.
+StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfig base);
+
+// Checks ranges and names (log level, listen address shape, limits > 0).
+Status validate_config(const ServerConfig& config);
+
+// What main() should do: run with a configuration, or exit with a code (0 after --help or
+// --version, 2 after a bad flag or configuration file, with the message already printed).
+using ConfigOutcome = std::variant<ServerConfig, int>;
+ConfigOutcome load_config(int argc, char** argv);
+
+}  // namespace proxima::server

@@ -1,0 +1,306 @@
+#include "convert.hpp"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <utility>
+
+namespace proxima::server {
+
+// The wire format is little-endian; decoding by memcpy is only right on a little-endian host.
+static_assert(std::endian::native == std::endian::little,
+              "convert.cpp decodes packed little-endian buffers by memcpy");
+
+grpc::Status to_grpc_status(const Status& status) {
+    grpc::StatusCode code = grpc::StatusCode::UNKNOWN;
+    switch (status.code()) {
+        case StatusCode::ok: return grpc::Status::OK;
+        case StatusCode::invalid_argument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
+        case StatusCode::not_found: code = grpc::StatusCode::NOT_FOUND; break;
+        case StatusCode::failed_precondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
+        case StatusCode::resource_exhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
+        case StatusCode::cancelled: code = grpc::StatusCode::CANCELLED; break;
+        case StatusCode::deadline_exceeded: code = grpc::StatusCode::DEADLINE_EXCEEDED; break;
+        case StatusCode::unavailable: code = grpc::StatusCode::UNAVAILABLE; break;
+        case StatusCode::internal: code = grpc::StatusCode::INTERNAL; break;
+    }
+    return {code, status.message()};
+}
+
+std::size_t vertex_stride(v1::ScalarType type) {
+    switch (type) {
+        case v1::SCALAR_TYPE_FLOAT32: return 3 * sizeof(float);
+        case v1::SCALAR_TYPE_FLOAT64: return 3 * sizeof(double);
+        default: return 0;
+    }
+}
+
+StatusOr<std::vector<Vec3>> decode_vertex_bytes(v1::ScalarType type, std::string_view bytes,
+                                                const std::string& what) {
+    const std::size_t stride = vertex_stride(type);
+    if (stride == 0) {
+        return invalid_argument(what + ": vertex scalar type must be SCALAR_TYPE_FLOAT32 or "
+                                       "SCALAR_TYPE_FLOAT64, got " +
+                                std::to_string(static_cast<int>(type)));
+    }
+    if (bytes.size() % stride != 0) {
+        return invalid_argument(what + ": vertex buffer is " + std::to_string(bytes.size()) +
+                                " bytes, not a multiple of " + std::to_string(stride) +
+                                " (x, y, z as " +
+                                (stride == 12 ? "float32" : "float64") + " per vertex)");
+    }
+    std::vector<Vec3> out(bytes.size() / stride);
+    const char* p = bytes.data();
+    if (type == v1::SCALAR_TYPE_FLOAT64) {
+        static_assert(sizeof(Vec3) == 24);
+        std::memcpy(out.data(), p, bytes.size());
+    } else {
+        for (auto& v : out) {
+            float xyz[3];
+            std::memcpy(xyz, p, sizeof(xyz));
+            p += sizeof(xyz);
+            v = {xyz[0], xyz[1], xyz[2]};
+        }
+    }
+    return out;
+}
+
+StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer, const std::string& what) {
+    return decode_vertex_bytes(buffer.type(), buffer.data(), what);
+}
+
+StatusOr<std::vector<TriangleIndices>> decode_indices(std::string_view bytes,
+                                                      const std::string& what) {
+    constexpr std::size_t stride = sizeof(TriangleIndices);
+    static_assert(stride == 12);
+    if (bytes.size() % stride != 0) {
+        return invalid_argument(what + ": index buffer is " + std::to_string(bytes.size()) +
+                                " bytes, not a multiple of 12 (three uint32 per triangle)");
+    }
+    std::vector<TriangleIndices> out(bytes.size() / stride);
+    std::memcpy(out.data(), bytes.data(), bytes.size());
+    return out;
+}
+
+StatusOr<NamedMesh> decode_mesh(const v1::Mesh& mesh, const std::string& what) {
+    const std::string label = mesh.name().empty() ? what : what + " ('" + mesh.name() + "')";
+    auto vertices = decode_vertices(mesh.vertices(), label);
+    if (!vertices.ok()) {
+        return vertices.status();
+    }
+    auto triangles = decode_indices(mesh.indices(), label);
+    if (!triangles.ok()) {
+        return triangles.status();
+    }
+    NamedMesh out;
+    out.name = mesh.name();
+    out.mesh.vertices = std::move(vertices).value();
+    out.mesh.triangles = std::move(triangles).value();
+    return out;
+}
+
+StatusOr<std::vector<NamedMesh>> decode_meshes(
+    const google::protobuf::RepeatedPtrField<v1::Mesh>& meshes, const std::string& field) {
+    std::vector<NamedMesh> out;
+    out.reserve(static_cast<std::size_t>(meshes.size()));
+    for (int i = 0; i < meshes.size(); ++i) {
+        auto mesh = decode_mesh(meshes[i], field + "[" + std::to_string(i) + "]");
+        if (!mesh.ok()) {
+            return mesh.status();
+        }
+        out.push_back(std::move(mesh).value());
+    }
+    return out;
+}
+
+namespace {
+
+StatusOr<CullerKind> decode_culler(v1::Culler culler) {
+    switch (culler) {
+        case v1::CULLER_AUTO: return CullerKind::automatic;
+        case v1::CULLER_BRUTE: return CullerKind::brute;
+        case v1::CULLER_BVH: return CullerKind::bvh;
+        default:
+            return invalid_argument("queries.culler: unknown culler " +
+                                    std::to_string(static_cast<int>(culler)) +
+                                    " (CULLER_AUTO, CULLER_BRUTE or CULLER_BVH)");
+    }
+}
+
+void encode_vec3(const Vec3& v, v1::Vec3* out) {
+    out->set_x(v.x);
+    out->set_y(v.y);
+    out->set_z(v.z);
+}
+
+void encode_pairs(const std::vector<FeaturePair>& pairs,
+                  google::protobuf::RepeatedPtrField<v1::FeaturePair>* out) {
+    out->Reserve(static_cast<int>(pairs.size()));
+    for (const auto& p : pairs) {
+        auto* q = out->Add();
+        q->set_object(p.object);
+        q->set_triangle(p.triangle);
+        q->set_other(p.other);
+        q->set_other_triangle(p.other_triangle);
+        q->set_distance(p.distance);
+    }
+}
+
+}  // namespace
+
+StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
+    DecodedFrame out;
+    auto& u = out.update;
+    u.removals.assign(frame.removals().begin(), frame.removals().end());
+
+    u.replacements.reserve(static_cast<std::size_t>(frame.topology_changes_size()));
+    for (int i = 0; i < frame.topology_changes_size(); ++i) {
+        const auto& change = frame.topology_changes(i);
+        const std::string field = "topology_changes[" + std::to_string(i) + "] (object " +
+                                  std::to_string(change.object_id()) + ")";
+        auto fragments = decode_meshes(change.fragments(), field + " fragments");
+        if (!fragments.ok()) {
+            return fragments.status();
+        }
+        u.replacements.push_back({change.object_id(), std::move(fragments).value()});
+    }
+
+    u.positions.reserve(static_cast<std::size_t>(frame.positions_size()));
+    for (int i = 0; i < frame.positions_size(); ++i) {
+        const auto& p = frame.positions(i);
+        auto vertices = decode_vertices(p.vertices(), "positions[" + std::to_string(i) +
+                                                          "] (object " +
+                                                          std::to_string(p.object_id()) + ")");
+        if (!vertices.ok()) {
+            return vertices.status();
+        }
+        u.positions.push_back({p.object_id(), std::move(vertices).value()});
+    }
+
+    auto additions = decode_meshes(frame.additions(), "additions");
+    if (!additions.ok()) {
+        return additions.status();
+    }
+    u.additions = std::move(additions).value();
+
+    const auto& q = frame.queries();
+    auto culler = decode_culler(q.culler());
+    if (!culler.ok()) {
+        return culler.status();
+    }
+    out.queries.separation = q.separation();
+    out.queries.self = q.self();
+    out.queries.collisions = q.collisions();
+    out.queries.pns = q.pns();
+    out.queries.culler = culler.value();
+    if (q.has_tolerance()) {
+        if (!std::isfinite(q.tolerance()) || q.tolerance() < 0.0) {
+            return invalid_argument("queries.tolerance must be a finite distance >= 0, got " +
+                                    std::to_string(q.tolerance()));
+        }
+        out.queries.tolerance = q.tolerance();
+    }
+    out.self_points = q.self_points();
+    return out;
+}
+
+void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
+                         const QueryResult& result, bool self_points, v1::FrameResult* out) {
+    out->mutable_object_ids()->Reserve(static_cast<int>(scene.size()));
+    for (const auto& obj : scene.objects()) {
+        out->add_object_ids(obj.id);
+    }
+    for (auto id : changes.added_ids) {
+        out->add_added_ids(id);
+    }
+    for (const auto& ids : changes.fragment_ids) {
+        auto* f = out->add_fragment_ids();
+        for (auto id : ids) {
+            f->add_ids(id);
+        }
+    }
+
+    out->mutable_separation()->Reserve(static_cast<int>(result.separation.size()));
+    for (const auto& s : result.separation) {
+        auto* r = out->add_separation();
+        r->set_distance(s.distance);
+        if (s.other == NO_OBJECT) {
+            continue;  // has_other false, distance +inf
+        }
+        r->set_has_other(true);
+        r->set_other(static_cast<std::uint32_t>(s.other));
+        r->set_triangle(s.triangle);
+        r->set_other_triangle(s.other_triangle);
+        encode_vec3(s.point, r->mutable_point());
+        encode_vec3(s.other_point, r->mutable_other_point());
+    }
+
+    out->mutable_self()->Reserve(static_cast<int>(result.self.size()));
+    for (const auto& per_object : result.self) {
+        auto* r = out->add_self();
+        r->mutable_closest()->Reserve(static_cast<int>(per_object.size()));
+        r->mutable_distance()->Reserve(static_cast<int>(per_object.size()));
+        if (self_points) {
+            r->mutable_points()->Reserve(static_cast<int>(6 * per_object.size()));
+        }
+        for (const auto& d : per_object) {
+            r->add_closest(d.closest);
+            r->add_distance(d.distance);
+            if (self_points) {
+                for (const Vec3* p : {&d.point, &d.other_point}) {
+                    r->add_points(p->x);
+                    r->add_points(p->y);
+                    r->add_points(p->z);
+                }
+            }
+        }
+    }
+
+    encode_pairs(result.collisions, out->mutable_collisions());
+    encode_pairs(result.tolerance, out->mutable_tolerance());
+    encode_pairs(result.pns, out->mutable_pns());
+
+    const auto& s = result.stats;
+    auto* st = out->mutable_stats();
+    st->set_culler(s.culler);
+    st->set_prepare_seconds(s.prepare_seconds);
+    st->set_broad_phase_seconds(s.broad_phase_seconds);
+    st->set_separation_seconds(s.separation_seconds);
+    st->set_self_seconds(s.self_seconds);
+    st->set_collision_seconds(s.collision_seconds);
+    st->set_tolerance_seconds(s.tolerance_seconds);
+    st->set_total_seconds(s.total_seconds);
+    st->set_exact_tests(s.exact_tests);
+    st->set_brute_force_tests(s.brute_force_tests);
+    st->set_object_pairs_tested(s.object_pairs_tested);
+    st->set_pns_pairs(s.pns_pairs);
+}
+
+void encode_object(const SceneObject& object, v1::ObjectInfo* out) {
+    out->set_id(object.id);
+    out->set_name(object.name);
+    out->set_vertex_count(static_cast<std::uint32_t>(object.vertices.size()));
+    out->set_triangle_count(static_cast<std::uint32_t>(object.triangle_count()));
+}
+
+void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
+                  std::uint64_t frames, v1::SceneInfo* out) {
+    out->set_scene_id(scene_id);
+    out->set_name(name);
+    out->mutable_objects()->Reserve(static_cast<int>(scene.size()));
+    for (const auto& obj : scene.objects()) {
+        encode_object(obj, out->add_objects());
+    }
+    out->set_frames(frames);
+    out->set_triangle_count(scene.triangle_count());
+}
+
+void encode_limits(const Limits& limits, v1::Limits* out) {
+    out->set_max_scenes(limits.max_scenes);
+    out->set_max_objects_per_scene(limits.max_objects_per_scene);
+    out->set_max_triangles_per_scene(limits.max_triangles_per_scene);
+    out->set_max_message_bytes(limits.max_message_bytes);
+    out->set_max_frames_in_flight(limits.max_frames_in_flight);
+}
+
+}  // namespace proxima::server

@@ -1,0 +1,62 @@
+#pragma once
+// The one place where proto messages become engine types and back, and where engine statuses
+// become gRPC statuses. Everything else in server/ speaks engine types (Scene, SceneUpdate,
+// QueryRequest, QueryResult, Status) plus the message objects gRPC hands it.
+//
+// Decoding checks what the wire format alone can get wrong (buffer sizes, scalar types, a negative
+// tolerance); what needs the scene (known ids, vertex counts, index ranges, finite coordinates,
+// limits) is checked by validate_update() in frames.hpp before anything changes.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <grpcpp/support/status.h>
+
+#include "config.hpp"
+#include "proxima/query/query.hpp"
+#include "proxima/scene.hpp"
+#include "proxima/status.hpp"
+#include "proxima/v1/proxima.pb.h"
+
+namespace proxima::server {
+
+// The single mapping of engine status codes onto gRPC codes; the message goes through unchanged.
+grpc::Status to_grpc_status(const Status& status);
+
+// Bytes per vertex for a scalar type (12 or 24); 0 for SCALAR_TYPE_UNSPECIFIED or unknown values.
+std::size_t vertex_stride(v1::ScalarType type);
+
+// Packed little-endian x, y, z per vertex. `what` names the buffer in error messages.
+StatusOr<std::vector<Vec3>> decode_vertex_bytes(v1::ScalarType type, std::string_view bytes,
+                                                const std::string& what);
+StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer, const std::string& what);
+// Packed little-endian uint32, three per triangle (index ranges are checked later, against the
+// vertex count, by the engine's validate_mesh).
+StatusOr<std::vector<TriangleIndices>> decode_indices(std::string_view bytes,
+                                                      const std::string& what);
+StatusOr<NamedMesh> decode_mesh(const v1::Mesh& mesh, const std::string& what);
+
+// A Frame in engine terms. SceneUpdate's vectors keep the proto's order, so index k of
+// `update.positions` is `positions[k]` of the request (error messages use these indices).
+struct DecodedFrame {
+    SceneUpdate update;
+    QueryRequest queries;
+    bool self_points = false;
+};
+StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame);
+StatusOr<std::vector<NamedMesh>> decode_meshes(
+    const google::protobuf::RepeatedPtrField<v1::Mesh>& meshes, const std::string& field);
+
+// Fills everything of a FrameResult but scene_id, frame and stats.server_seconds, which the
+// caller knows better. `scene` is the scene the query ran on (for object ids in result order).
+void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
+                         const QueryResult& result, bool self_points, v1::FrameResult* out);
+void encode_object(const SceneObject& object, v1::ObjectInfo* out);
+void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
+                  std::uint64_t frames, v1::SceneInfo* out);
+void encode_limits(const Limits& limits, v1::Limits* out);
+
+}  // namespace proxima::server

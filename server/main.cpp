@@ -1,0 +1,51 @@
+// proximad: the proximity query daemon. Configuration, the signal thread, and the daemon's
+// lifetime; everything else is in the proxima_server library.
+#include <csignal>
+#include <cstdio>
+#include <thread>
+#include <variant>
+
+#include <pthread.h>
+#include <spdlog/spdlog.h>
+
+#include "config.hpp"
+#include "daemon.hpp"
+
+int main(int argc, char** argv) {
+    using namespace proxima::server;
+
+    // SIGTERM and SIGINT are blocked in every thread and taken by one thread with sigwait, so
+    // shutdown runs as ordinary code, not in a signal handler. The mask is inherited, so it must
+    // be set before gRPC, oneTBB or the worker pool start threads.
+    sigset_t shutdown_signals;
+    sigemptyset(&shutdown_signals);
+    sigaddset(&shutdown_signals, SIGTERM);
+    sigaddset(&shutdown_signals, SIGINT);
+    pthread_sigmask(SIG_BLOCK, &shutdown_signals, nullptr);
+
+    auto outcome = load_config(argc, argv);
+    if (const int* exit_code = std::get_if<int>(&outcome)) {
+        return *exit_code;
+    }
+    const auto& config = std::get<ServerConfig>(outcome);
+    configure_logging(config.log_level);
+
+    Daemon daemon(config);
+    auto address = daemon.start();
+    if (!address.ok()) {
+        spdlog::critical("{}", address.status().message());
+        return 1;
+    }
+    // The contract with scripts and tests: the first line of standard output, flushed.
+    std::printf("listening on %s\n", address.value().c_str());
+    std::fflush(stdout);
+
+    std::thread signal_thread([&] {
+        int signal = 0;
+        sigwait(&shutdown_signals, &signal);
+        daemon.shutdown(signal == SIGTERM ? "SIGTERM" : "SIGINT");
+    });
+    daemon.wait();
+    signal_thread.join();
+    return 0;
+}

@@ -1,0 +1,73 @@
+#pragma once
+// Live scenes by id. Each scene has its own ProximityEngine behind its own mutex: the engine is
+// not thread-safe, and one frame at a time per scene is also what makes results well defined
+// (frames of one scene apply in the order they take the mutex). Different scenes run in
+// parallel.
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <string>
+#include <unordered_map>
+
+#include "proxima/query/query.hpp"
+#include "proxima/status.hpp"
+
+namespace proxima::server {
+
+struct SceneEntry {
+    SceneEntry(std::string scene_id, std::string scene_name, bool owned_by_stream)
+        : id(std::move(scene_id)), name(std::move(scene_name)), stream_owned(owned_by_stream) {}
+
+    const std::string id;
+    const std::string name;
+    const bool stream_owned;
+
+    std::mutex mutex;         // held for a whole frame, an upload's apply, a describe
+    ProximityEngine engine;   // guarded by mutex
+    std::uint64_t frames = 0; // guarded by mutex: frames applied so far
+
+    // Set when the scene leaves the registry; a frame that holds the entry already may finish,
+    // later ones fail with NOT_FOUND. Atomic so DeleteScene need not wait for a running frame.
+    std::atomic<bool> deleted{false};
+    // Sizes after the last change, readable without the mutex: early limit checks run on gRPC's
+    // callback threads, which must not wait behind a running frame. The authoritative check is
+    // repeated under the mutex.
+    std::atomic<std::uint64_t> object_count{0};
+    std::atomic<std::uint64_t> triangle_count{0};
+
+    // Call with `mutex` held after the scene changed.
+    void publish_sizes();
+};
+
+class SceneRegistry {
+public:
+    explicit SceneRegistry(std::uint64_t max_scenes);
+
+    // A new, unregistered entry with a fresh random-looking id (16 hex digits). Ids are random
+    // so that one client cannot guess another's scene by counting.
+    std::shared_ptr<SceneEntry> make_entry(std::string name, bool stream_owned);
+    // Fails early, before a request does expensive work, when the registry is full.
+    Status check_capacity() const;
+    // Makes the entry findable; resource_exhausted at max_scenes.
+    Status insert(const std::shared_ptr<SceneEntry>& entry);
+    // A scene made by CreateScene, or nullptr. Stream-owned scenes count towards the limit but
+    // are private to their stream: no other call finds, changes or deletes them by id.
+    std::shared_ptr<SceneEntry> find(const std::string& id) const;
+    // False when unknown. The entry lives on while a frame still holds it.
+    bool erase(const std::string& id);
+    std::size_t size() const;
+    std::uint64_t max_scenes() const { return m_max_scenes; }
+
+private:
+    Status full_status() const;
+
+    const std::uint64_t m_max_scenes;
+    mutable std::mutex m_mu;
+    std::unordered_map<std::string, std::shared_ptr<SceneEntry>> m_scenes;
+    std::mt19937_64 m_rng;
+};
+
+}  // namespace proxima::server

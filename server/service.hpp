@@ -1,0 +1,63 @@
+#pragma once
+// The proxima.v1.Proximity service on gRPC's callback API. Each method is a thin adapter: decode
+// (convert.hpp), call the engine through frames.hpp with the scene's mutex held, encode, map the
+// status once (to_grpc_status). Engine work runs on a WorkerPool, never on gRPC's callback
+// threads; a call's deadline and cancellation reach the engine as a proxima::CancelToken.
+
+#include <chrono>
+#include <cstddef>
+#include <memory>
+
+#include <grpcpp/grpcpp.h>
+
+#include "config.hpp"
+#include "proxima/v1/proxima.grpc.pb.h"
+
+namespace proxima::server {
+
+// What ServerInfo.proximity_backend reports: the cullers this build can run.
+inline constexpr const char* PROXIMITY_BACKEND = "cpu (bvh, brute)";
+
+class ProximityService final : public v1::Proximity::CallbackService {
+public:
+    explicit ProximityService(const ServerConfig& config);
+    ~ProximityService() override;
+
+    grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
+                                            const v1::GetServerInfoRequest* request,
+                                            v1::ServerInfo* response) override;
+    grpc::ServerUnaryReactor* CreateScene(grpc::CallbackServerContext* context,
+                                          const v1::CreateSceneRequest* request,
+                                          v1::SceneInfo* response) override;
+    grpc::ServerUnaryReactor* DescribeScene(grpc::CallbackServerContext* context,
+                                            const v1::DescribeSceneRequest* request,
+                                            v1::SceneInfo* response) override;
+    grpc::ServerUnaryReactor* DeleteScene(grpc::CallbackServerContext* context,
+                                          const v1::DeleteSceneRequest* request,
+                                          v1::DeleteSceneResponse* response) override;
+    grpc::ServerReadReactor<v1::UploadChunk>* UploadObject(grpc::CallbackServerContext* context,
+                                                           v1::ObjectInfo* response) override;
+    grpc::ServerBidiReactor<v1::Frame, v1::FrameResult>* StreamFrames(
+        grpc::CallbackServerContext* context) override;
+    grpc::ServerUnaryReactor* Query(grpc::CallbackServerContext* context, const v1::Frame* request,
+                                    v1::FrameResult* response) override;
+
+    // The first step of a graceful shutdown: new calls are refused with UNAVAILABLE, idle
+    // streams are finished with UNAVAILABLE now, busy ones once the frames they already read are
+    // answered; unary calls and uploads in flight run to completion.
+    void begin_drain();
+    // Waits until no call is in flight, or until `deadline`; false if calls remain (the server's
+    // Shutdown then cancels them, which stops their engine work).
+    bool wait_idle(std::chrono::steady_clock::time_point deadline);
+
+    std::size_t live_scenes() const;
+    std::size_t live_streams() const;
+    std::size_t live_calls() const;  // streams, uploads and unary calls in flight
+
+    struct Shared;  // state the reactors share; defined in service.cpp
+
+private:
+    std::unique_ptr<Shared> m_shared;
+};
+
+}  // namespace proxima::server

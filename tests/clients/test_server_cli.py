@@ -1,0 +1,342 @@
+#!/usr/bin/env python3
+"""End to end, client against daemon: starts `proximad --listen 127.0.0.1:0`, checks that
+`proxima distance --server` prints exactly what `--local` prints (apart from `stats`) on touching,
+crossing and separated boxes, split components, self / collision / tolerance / PNS queries and
+chunked uploads; that the server demo reports what the local demo reports, through a topology
+change; that daemon errors reach the user as `proxima: error: CODE: message`; that the Python
+client and example work; that docs/api.md's examples are the code and print what it says; and that
+SIGTERM stops the daemon with exit status 0.
+
+Usage: test_server_cli.py --proxima PROXIMA --proximad PROXIMAD --python PYTHON --example EXAMPLE
+                          --api-doc docs/api.md --api-doc-example API_DOC_EXAMPLE
+(PYTHON: an interpreter with Debian's grpc and google.protobuf modules, /usr/bin/python3.)"""
+import argparse
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import unittest
+
+parser = argparse.ArgumentParser()
+parser.add_argument("--proxima", required=True)
+parser.add_argument("--proximad", required=True)
+parser.add_argument("--python", default="/usr/bin/python3")
+parser.add_argument("--example", required=True)
+parser.add_argument("--api-doc", required=True,
+                    help="docs/api.md, whose snippets are checked against the code")
+parser.add_argument("--api-doc-example", required=True,
+                    help="the C++ example of docs/api.md, compiled")
+ARGS, UNITTEST_ARGS = parser.parse_known_args()
+CLIENT_DIR = os.path.dirname(os.path.abspath(ARGS.example))
+
+
+def box_off(lo, hi):
+    v = [(hi[0] if k & 1 else lo[0], hi[1] if k & 2 else lo[1], hi[2] if k & 4 else lo[2])
+         for k in range(8)]
+    f = [(0, 2, 1), (1, 2, 3), (4, 5, 6), (5, 7, 6), (0, 1, 4), (1, 5, 4),
+         (2, 6, 3), (3, 6, 7), (0, 4, 2), (2, 4, 6), (1, 3, 5), (3, 7, 5)]
+    return v, f
+
+
+def grid_off(n, z):
+    """An n x n wavy height field at height ~z: (n+1)^2 vertices, 2 n^2 triangles."""
+    v = [(i / n, j / n, z + 0.01 * ((i * 7 + j * 3) % 5)) for j in range(n + 1)
+         for i in range(n + 1)]
+    f = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            f += [(a, a + 1, a + n + 2), (a, a + n + 2, a + n + 1)]
+    return v, f
+
+
+def write_off(path, parts):
+    verts, faces = [], []
+    for v, f in parts:
+        base = len(verts)
+        verts += v
+        faces += [tuple(base + i for i in t) for t in f]
+    with open(path, "w") as out:
+        out.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
+        for p in verts:
+            out.write(" ".join(repr(float(c)) for c in p) + "\n")
+        for t in faces:
+            out.write("3 " + " ".join(str(i) for i in t) + "\n")
+
+
+def run(*cmd, timeout=240):
+    p = subprocess.run(list(cmd), capture_output=True, text=True, timeout=timeout)
+    assert p.returncode >= 0, f"{cmd[0]} crashed with signal {-p.returncode}: {p.stderr}"
+    return p
+
+
+class Daemon:
+    """proximad on a free loopback port; `address` comes from its first stdout line."""
+
+    def __init__(self, *flags):
+        self.stderr = tempfile.TemporaryFile(mode="w+")
+        self.proc = subprocess.Popen([ARGS.proximad, "--listen", "127.0.0.1:0", *flags],
+                                     stdout=subprocess.PIPE, stderr=self.stderr, text=True)
+        first = []
+        reader = threading.Thread(target=lambda: first.append(self.proc.stdout.readline()))
+        reader.daemon = True
+        reader.start()
+        reader.join(30)
+        m = re.match(r"listening on (\S+:\d+)$", first[0].strip()) if first else None
+        if not m:
+            self.proc.kill()
+            self.proc.wait()
+            raise RuntimeError(f"proximad did not print 'listening on HOST:PORT' (got {first!r});"
+                               f" stderr:\n{self.log()}")
+        self.address = m.group(1)
+        # Keep draining stdout so the daemon never blocks on a full pipe.
+        threading.Thread(target=self.proc.stdout.read, daemon=True).start()
+
+    def log(self):
+        self.stderr.seek(0)
+        return self.stderr.read()
+
+    def close(self):
+        self.stderr.close()
+
+    def stop(self):
+        """SIGTERM, then the exit status (killed after 60 s: a hang is a failure too)."""
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(60)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            return "hung after SIGTERM"
+        finally:
+            self.proc.stdout.close()
+
+
+def strip_stats(doc):
+    doc = dict(doc)
+    doc.pop("stats", None)
+    return doc
+
+
+class ServerCli(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix="proxima-e2e-")
+        cls.files = {}
+        shapes = {
+            "a": [box_off((0, 0, 0), (1, 1, 1))],
+            "apart": [box_off((1.5, 0, 0), (2.5, 1, 1))],
+            "touching": [box_off((1, 0.25, 0.25), (1.5, 0.75, 0.75))],
+            "crossing": [box_off((0.5, 0.5, 0.5), (1.5, 1.5, 1.5))],
+            "two": [box_off((0, 0, 0), (1, 1, 1)), box_off((0, 0, 1.25), (1, 1, 2))],
+            # 52K vertices, 102K triangles: both buffers take two 1 MiB upload chunks.
+            "grid": [grid_off(227, 1.1)],
+        }
+        for name, parts in shapes.items():
+            cls.files[name] = os.path.join(cls.tmp, name + ".off")
+            write_off(cls.files[name], parts)
+        cls.daemon = Daemon()
+
+    @classmethod
+    def tearDownClass(cls):
+        status = cls.daemon.stop()
+        log = cls.daemon.log()
+        cls.daemon.close()
+        if status != 0:
+            raise AssertionError(f"proximad exited with {status} after SIGTERM; stderr:\n{log}")
+
+    def json_of(self, *args):
+        p = run(ARGS.proxima, *args)
+        self.assertEqual(p.returncode, 0, f"{args}: {p.stderr}")
+        return json.loads(p.stdout)
+
+    def assert_same_as_local(self, *args, server_flags=()):
+        files = [self.files[a] if a in self.files else a for a in args]
+        local = self.json_of("distance", "--local", "--json", *files)
+        default = self.json_of("distance", "--json", *files)
+        remote = self.json_of("distance", "--server", self.daemon.address, *server_flags,
+                              "--json", *files)
+        self.assertIn("stats", remote)
+        self.assertEqual(strip_stats(local), strip_stats(default))
+        # Exact equality, floats included: float64 on the wire and the same engine.
+        self.assertEqual(strip_stats(local), strip_stats(remote), f"{args} {server_flags}")
+        return remote
+
+    def test_distance_boxes_apart_touching_crossing(self):
+        doc = self.assert_same_as_local("a", "apart")
+        self.assertEqual(doc["objects"][0]["separation"]["distance"], 0.5)
+        doc = self.assert_same_as_local("--collisions", "a", "touching")
+        self.assertEqual(doc["objects"][0]["separation"]["distance"], 0.0)
+        doc = self.assert_same_as_local("--collisions", "--tolerance", "0.1", "a", "crossing")
+        self.assertGreater(len(doc["collisions"]), 0)
+        self.assert_same_as_local("a")  # alone: no other object, nulls
+
+    def test_distance_components_self_collisions_tolerance(self):
+        doc = self.assert_same_as_local("--split-components", "--self", "--collisions",
+                                        "--tolerance", "0.3", "two")
+        self.assertEqual(len(doc["self"]), 24)
+        self.assertGreater(len(doc["tolerance"]), 0)
+        for culler in ("brute", "bvh"):
+            self.assert_same_as_local("--culler", culler, "--split-components", "--self",
+                                      "--collisions", "--tolerance", "0.3", "--pns", "two", "a",
+                                      "apart", "crossing")
+
+    def test_distance_through_uploads(self):
+        # 0: every object uploaded; 400: the first box inline (~370 bytes), the rest uploaded.
+        for inline in ("0", "400"):
+            self.assert_same_as_local("--split-components", "--self", "--tolerance", "0.3",
+                                      "two", "a", "apart",
+                                      server_flags=("--inline-mesh-bytes", inline))
+        # Separation only: a tolerance or self query on a fine grid is quadratic in its output.
+        doc = self.assert_same_as_local("grid", "a")
+        self.assertEqual(doc["objects"][0]["triangles"], 2 * 227 * 227)
+        self.assertAlmostEqual(doc["objects"][0]["separation"]["distance"], 0.1, places=12)
+
+    def test_distance_text_mode(self):
+        p = run(ARGS.proxima, "distance", "--server", self.daemon.address,
+                self.files["a"], self.files["apart"])
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertIn("distance 0.5 to", p.stdout)
+
+    def test_daemon_errors_reach_the_user(self):
+        small = Daemon("--max-triangles-per-scene", "20")
+        try:
+            p = run(ARGS.proxima, "distance", "--server", small.address, "--json",
+                    self.files["a"], self.files["apart"])
+            self.assertEqual(p.returncode, 1)
+            self.assertEqual(p.stdout, "")
+            self.assertRegex(p.stderr, r"^proxima: error: RESOURCE_EXHAUSTED: .*\S")
+            self.assertIn("20", p.stderr)
+        finally:
+            status = small.stop()
+            log = small.log()
+            small.close()
+            self.assertEqual(status, 0, log)
+        # Nobody listens on port 1: UNAVAILABLE after the connect timeout.
+        p = run(ARGS.proxima, "distance", "--server", "127.0.0.1:1", self.files["a"])
+        self.assertEqual(p.returncode, 1)
+        self.assertRegex(p.stderr, r"^proxima: error: UNAVAILABLE: cannot reach proximad at "
+                                   r"127\.0\.0\.1:1")
+        p = run(ARGS.proxima, "distance", "--local", "--server", self.daemon.address,
+                self.files["a"])
+        self.assertNotEqual(p.returncode, 0)
+
+    def demo_lines(self, *args):
+        p = run(ARGS.proxima, "demo", "--json", *args)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        return [json.loads(line) for line in p.stdout.splitlines()]
+
+    def test_demo_matches_local(self):
+        keys = ("frame", "objects", "triangles", "min_separation", "min_self_distance",
+                "collisions")
+        # `breaking` replaces objects by fragments mid-sequence: the id translation at work.
+        for scene, frames in (("breaking", "6"), ("bowl", "3")):
+            local = self.demo_lines("--scene", scene, "--frames", frames)
+            remote = self.demo_lines("--scene", scene, "--frames", frames, "--server",
+                                     self.daemon.address)
+            self.assertEqual(len(local), int(frames))
+            self.assertEqual([{k: x[k] for k in keys} for x in local],
+                             [{k: x[k] for k in keys} for x in remote], scene)
+            for x in remote:
+                self.assertGreater(x["round_trip_ms"], 0)
+                self.assertGreater(x["stats"]["exact_tests"], 0)
+            if scene == "breaking":
+                self.assertGreater(len({x["objects"] for x in local}), 1, "no topology change")
+        p = run(ARGS.proxima, "demo", "--scene", "bowl", "--frames", "2", "--server",
+                self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertIn("rtt-ms", p.stdout)
+        self.assertEqual(len(p.stdout.strip().splitlines()), 5)  # 3 header lines, 2 frames
+
+    def test_info(self):
+        info = self.json_of("info", "--server", self.daemon.address, "--json")
+        self.assertEqual(info["api"], "proxima.v1")
+        self.assertTrue(info["version"])
+        self.assertGreater(info["limits"]["max_frames_in_flight"], 0)
+        p = run(ARGS.proxima, "info", "--server", self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertIn("proxima.v1", p.stdout)
+
+    def test_python_example(self):
+        p = run(ARGS.python, ARGS.example, self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        lines = p.stdout.splitlines()
+        self.assertEqual(len(lines), 2, p.stdout)
+        self.assertTrue(lines[0].startswith("distance a-b: 0.5 "), lines[0])
+        self.assertTrue(lines[1].endswith("distance a-b: 0.25"), lines[1])
+
+    def test_python_client(self):
+        script = r"""
+import sys
+sys.path.insert(0, sys.argv[1])
+import proxima_client as p
+a, b = p.box("a", (0, 0, 0), (1, 1, 1)), p.box("b", (2, 0, 0), (3, 1, 1))
+with p.Client(sys.argv[2]) as c:
+    assert c.server_info().api == "proxima.v1"
+    try:
+        c.query("no-such-scene")
+        raise SystemExit("query on an unknown scene succeeded")
+    except p.ProximaError as e:
+        assert e.code == "NOT_FOUND", e
+    # Uploads (inline budget 0), then a stream-owned scene in lockstep and as a generator.
+    c.inline_mesh_bytes = 0
+    scene = c.create_scene([a, b])
+    assert [o.triangle_count for o in scene.objects] == [12, 12], scene
+    assert c.query(scene.scene_id).separation[1].distance == 1.0
+    c.delete_scene(scene.scene_id)
+    s = c.open_stream()
+    s.send(p.make_frame(additions=[a, b]))
+    first = s.receive()
+    moved = [(x - 0.5, y, z) for x, y, z in b.vertices]
+    s.send(p.make_frame(frame=1, positions={first.added_ids[1]: moved}, self_query=True))
+    second = s.receive()
+    assert second.frame == 1 and second.separation[0].distance == 0.5, second.separation
+    assert len(second.self) == 2 and len(second.self[0].closest) == 12
+    s.close()
+    results = list(c.stream([p.make_frame(additions=[a, b], collisions=True)]))
+    assert len(results) == 1 and results[0].separation[0].distance == 1.0
+    s = c.open_stream()
+    s.send(p.make_frame(additions=[a]))
+    s.receive()
+    s.send(p.make_frame(frame=1, removals=[12345]))
+    try:
+        s.receive()
+        raise SystemExit("a frame naming an unknown object succeeded")
+    except p.ProximaError as e:
+        assert e.code == "NOT_FOUND" and "12345" in e.message, e
+print("ok")
+"""
+        p = run(ARGS.python, "-c", script, CLIENT_DIR, self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stdout + p.stderr)
+        self.assertEqual(p.stdout.strip(), "ok")
+
+    def test_api_doc_snippets(self):
+        with open(ARGS.api_doc) as f:
+            doc = f.read()
+        # The C++ example (compiled from the page by CMake) prints what the page says it prints.
+        printed = re.search(r"It prints:\n\n```\n(.*?)```", doc, re.S)
+        self.assertIsNotNone(printed, "docs/api.md: no 'It prints:' block")
+        p = run(ARGS.api_doc_example, self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertEqual(p.stdout, printed.group(1))
+        # The Python example on the page is the one in clients/python, and the stream snippet runs.
+        blocks = re.findall(r"```python\n(.*?)```", doc, re.S)
+        self.assertEqual(len(blocks), 2)
+        with open(ARGS.example) as f:
+            self.assertIn(blocks[0], f.read())
+        prelude = f"import sys\nsys.path.insert(0, {CLIENT_DIR!r})\naddress = sys.argv[1]\n"
+        p = run(ARGS.python, "-c", prelude + blocks[1], self.daemon.address)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertEqual(p.stdout.splitlines()[-1], "0.0")
+
+
+if __name__ == "__main__":
+    for path in (ARGS.proxima, ARGS.proximad, ARGS.example, ARGS.api_doc, ARGS.api_doc_example):
+        if not os.path.exists(path):
+            sys.exit(f"test_server_cli: {path} does not exist (build the tree first)")
+    unittest.main(argv=[sys.argv[0], "-v", *UNITTEST_ARGS])
