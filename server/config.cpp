@@ -20,7 +20,8 @@ const char* const LOG_LEVELS[] = {"trace", "debug", "info", "warn", "error", "cr
 
 template <class T>
 Status read_unsigned(const nlohmann::json& value, const std::string& key, T& out) {
-    if (!value.is_number_unsigned() && !(value.is_number_integer() && value.get<std::int64_t>() >= 0)) {
+    if (!value.is_number_unsigned() &&
+        !(value.is_number_integer() && value.get<std::int64_t>() >= 0)) {
         return invalid_argument("config key '" + key + "' must be a non-negative integer, got " +
                                 value.dump());
     }
@@ -102,8 +103,9 @@ Status validate_config(const ServerConfig& config) {
     const auto& l = config.limits;
     if (l.max_scenes == 0 || l.max_objects_per_scene == 0 || l.max_triangles_per_scene == 0 ||
         l.max_frames_in_flight == 0) {
-        return invalid_argument("limits must be at least 1 (max-scenes, max-objects-per-scene, "
-                                "max-triangles-per-scene, max-frames-in-flight)");
+        return invalid_argument(
+            "limits must be at least 1 (max-scenes, max-objects-per-scene, "
+            "max-triangles-per-scene, max-frames-in-flight)");
     }
     // gRPC takes message sizes as int.
     if (l.max_message_bytes < 1024 ||

@@ -16,11 +16,11 @@ namespace proxima::server {
 // Limits protect the daemon from one client's mistakes. A request that would exceed one is
 // rejected whole with RESOURCE_EXHAUSTED naming the limit, before anything changes.
 struct Limits {
-    std::uint64_t max_scenes = 64;                     // live scenes, stream-owned ones included
+    std::uint64_t max_scenes = 64;  // live scenes, stream-owned ones included
     std::uint64_t max_objects_per_scene = 100'000;
     std::uint64_t max_triangles_per_scene = 50'000'000;
-    std::uint64_t max_message_bytes = 256ull << 20;    // each direction; gRPC's own check
-    std::uint32_t max_frames_in_flight = 4;            // per stream: read but not yet answered
+    std::uint64_t max_message_bytes = 256ull << 20;  // each direction; gRPC's own check
+    std::uint32_t max_frames_in_flight = 4;          // per stream: read but not yet answered
 };
 
 struct ServerConfig {

@@ -11,27 +11,49 @@ namespace proxima::server {
 static_assert(std::endian::native == std::endian::little,
               "convert.cpp decodes packed little-endian buffers by memcpy");
 
-grpc::Status to_grpc_status(const Status& status) {
-    grpc::StatusCode code = grpc::StatusCode::UNKNOWN;
-    switch (status.code()) {
-        case StatusCode::ok: return grpc::Status::OK;
-        case StatusCode::invalid_argument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
-        case StatusCode::not_found: code = grpc::StatusCode::NOT_FOUND; break;
-        case StatusCode::failed_precondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
-        case StatusCode::resource_exhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
-        case StatusCode::cancelled: code = grpc::StatusCode::CANCELLED; break;
-        case StatusCode::deadline_exceeded: code = grpc::StatusCode::DEADLINE_EXCEEDED; break;
-        case StatusCode::unavailable: code = grpc::StatusCode::UNAVAILABLE; break;
-        case StatusCode::internal: code = grpc::StatusCode::INTERNAL; break;
+namespace {
+
+grpc::StatusCode grpc_code(StatusCode code) {
+    switch (code) {
+        case StatusCode::ok:
+            return grpc::StatusCode::OK;
+        case StatusCode::invalid_argument:
+            return grpc::StatusCode::INVALID_ARGUMENT;
+        case StatusCode::not_found:
+            return grpc::StatusCode::NOT_FOUND;
+        case StatusCode::failed_precondition:
+            return grpc::StatusCode::FAILED_PRECONDITION;
+        case StatusCode::resource_exhausted:
+            return grpc::StatusCode::RESOURCE_EXHAUSTED;
+        case StatusCode::cancelled:
+            return grpc::StatusCode::CANCELLED;
+        case StatusCode::deadline_exceeded:
+            return grpc::StatusCode::DEADLINE_EXCEEDED;
+        case StatusCode::unavailable:
+            return grpc::StatusCode::UNAVAILABLE;
+        case StatusCode::internal:
+            return grpc::StatusCode::INTERNAL;
     }
-    return {code, status.message()};
+    return grpc::StatusCode::UNKNOWN;
+}
+
+}  // namespace
+
+grpc::Status to_grpc_status(const Status& status) {
+    if (status.ok()) {
+        return grpc::Status::OK;
+    }
+    return {grpc_code(status.code()), status.message()};
 }
 
 std::size_t vertex_stride(v1::ScalarType type) {
     switch (type) {
-        case v1::SCALAR_TYPE_FLOAT32: return 3 * sizeof(float);
-        case v1::SCALAR_TYPE_FLOAT64: return 3 * sizeof(double);
-        default: return 0;
+        case v1::SCALAR_TYPE_FLOAT32:
+            return 3 * sizeof(float);
+        case v1::SCALAR_TYPE_FLOAT64:
+            return 3 * sizeof(double);
+        default:
+            return 0;
     }
 }
 
@@ -39,21 +61,24 @@ StatusOr<std::vector<Vec3>> decode_vertex_bytes(v1::ScalarType type, std::string
                                                 const std::string& what) {
     const std::size_t stride = vertex_stride(type);
     if (stride == 0) {
-        return invalid_argument(what + ": vertex scalar type must be SCALAR_TYPE_FLOAT32 or "
-                                       "SCALAR_TYPE_FLOAT64, got " +
+        return invalid_argument(what +
+                                ": vertex scalar type must be SCALAR_TYPE_FLOAT32 or "
+                                "SCALAR_TYPE_FLOAT64, got " +
                                 std::to_string(static_cast<int>(type)));
     }
     if (bytes.size() % stride != 0) {
         return invalid_argument(what + ": vertex buffer is " + std::to_string(bytes.size()) +
                                 " bytes, not a multiple of " + std::to_string(stride) +
-                                " (x, y, z as " +
-                                (stride == 12 ? "float32" : "float64") + " per vertex)");
+                                " (x, y, z as " + (stride == 12 ? "float32" : "float64") +
+                                " per vertex)");
     }
     std::vector<Vec3> out(bytes.size() / stride);
     const char* p = bytes.data();
     if (type == v1::SCALAR_TYPE_FLOAT64) {
         static_assert(sizeof(Vec3) == 24);
-        std::memcpy(out.data(), p, bytes.size());
+        if (!bytes.empty()) {  // memcpy from/to null (an empty vector's data()) is undefined
+            std::memcpy(out.data(), p, bytes.size());
+        }
     } else {
         for (auto& v : out) {
             float xyz[3];
@@ -65,7 +90,8 @@ StatusOr<std::vector<Vec3>> decode_vertex_bytes(v1::ScalarType type, std::string
     return out;
 }
 
-StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer, const std::string& what) {
+StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer,
+                                            const std::string& what) {
     return decode_vertex_bytes(buffer.type(), buffer.data(), what);
 }
 
@@ -78,7 +104,9 @@ StatusOr<std::vector<TriangleIndices>> decode_indices(std::string_view bytes,
                                 " bytes, not a multiple of 12 (three uint32 per triangle)");
     }
     std::vector<TriangleIndices> out(bytes.size() / stride);
-    std::memcpy(out.data(), bytes.data(), bytes.size());
+    if (!bytes.empty()) {  // memcpy from/to null (an empty vector's data()) is undefined
+        std::memcpy(out.data(), bytes.data(), bytes.size());
+    }
     return out;
 }
 
@@ -117,9 +145,12 @@ namespace {
 
 StatusOr<CullerKind> decode_culler(v1::Culler culler) {
     switch (culler) {
-        case v1::CULLER_AUTO: return CullerKind::automatic;
-        case v1::CULLER_BRUTE: return CullerKind::brute;
-        case v1::CULLER_BVH: return CullerKind::bvh;
+        case v1::CULLER_AUTO:
+            return CullerKind::automatic;
+        case v1::CULLER_BRUTE:
+            return CullerKind::brute;
+        case v1::CULLER_BVH:
+            return CullerKind::bvh;
         default:
             return invalid_argument("queries.culler: unknown culler " +
                                     std::to_string(static_cast<int>(culler)) +
@@ -168,9 +199,9 @@ StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
     u.positions.reserve(static_cast<std::size_t>(frame.positions_size()));
     for (int i = 0; i < frame.positions_size(); ++i) {
         const auto& p = frame.positions(i);
-        auto vertices = decode_vertices(p.vertices(), "positions[" + std::to_string(i) +
-                                                          "] (object " +
-                                                          std::to_string(p.object_id()) + ")");
+        auto vertices =
+            decode_vertices(p.vertices(), "positions[" + std::to_string(i) + "] (object " +
+                                              std::to_string(p.object_id()) + ")");
         if (!vertices.ok()) {
             return vertices.status();
         }

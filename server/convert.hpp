@@ -32,7 +32,8 @@ std::size_t vertex_stride(v1::ScalarType type);
 // Packed little-endian x, y, z per vertex. `what` names the buffer in error messages.
 StatusOr<std::vector<Vec3>> decode_vertex_bytes(v1::ScalarType type, std::string_view bytes,
                                                 const std::string& what);
-StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer, const std::string& what);
+StatusOr<std::vector<Vec3>> decode_vertices(const v1::VertexBuffer& buffer,
+                                            const std::string& what);
 // Packed little-endian uint32, three per triangle (index ranges are checked later, against the
 // vertex count, by the engine's validate_mesh).
 StatusOr<std::vector<TriangleIndices>> decode_indices(std::string_view bytes,

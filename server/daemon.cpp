@@ -39,6 +39,9 @@ StatusOr<std::string> Daemon::start() {
     grpc::ServerBuilder builder;
     int port = 0;
     builder.AddListeningPort(m_config.listen, grpc::InsecureServerCredentials(), &port);
+    // gRPC sets SO_REUSEPORT by default: a second daemon on a busy port would then start and
+    // share the port's connections with the first. A busy port must be an error.
+    builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
     // Explicit in both directions: a frame of a large scene is big, but not unboundedly so.
     const int max_bytes = static_cast<int>(m_config.limits.max_message_bytes);
     builder.SetMaxReceiveMessageSize(max_bytes);
@@ -49,7 +52,7 @@ StatusOr<std::string> Daemon::start() {
         m_server.reset();
         return Status(StatusCode::unavailable,
                       "cannot listen on " + m_config.listen +
-                          " (address in use, not local, or not HOST:PORT)");
+                          " (port in use, address not on this machine, or not HOST:PORT)");
     }
     if (auto* health = m_server->GetHealthCheckService()) {
         health->SetServingStatus("", true);
@@ -58,12 +61,13 @@ StatusOr<std::string> Daemon::start() {
     const auto host = m_config.listen.substr(0, m_config.listen.rfind(':'));
     const auto address = host + ":" + std::to_string(port);
     const auto& l = m_config.limits;
-    spdlog::info("proximad {} serving proxima.v1 on {} backend=\"{}\" gl_renderer=none "
-                 "max_scenes={} max_objects_per_scene={} max_triangles_per_scene={} "
-                 "max_message_bytes={} max_frames_in_flight={} drain_seconds={}",
-                 PROXIMA_VERSION, address, PROXIMITY_BACKEND, l.max_scenes,
-                 l.max_objects_per_scene, l.max_triangles_per_scene, l.max_message_bytes,
-                 l.max_frames_in_flight, m_config.drain_seconds);
+    spdlog::info(
+        "proximad {} serving proxima.v1 on {} backend=\"{}\" gl_renderer=none "
+        "max_scenes={} max_objects_per_scene={} max_triangles_per_scene={} "
+        "max_message_bytes={} max_frames_in_flight={} drain_seconds={}",
+        PROXIMA_VERSION, address, PROXIMITY_BACKEND, l.max_scenes, l.max_objects_per_scene,
+        l.max_triangles_per_scene, l.max_message_bytes, l.max_frames_in_flight,
+        m_config.drain_seconds);
     return address;
 }
 
@@ -99,10 +103,10 @@ void Daemon::shutdown(const std::string& reason) {
         // Stops accepting and cancels whatever is left (reactors see OnCancel, which stops the
         // engine through their CancelToken), then closes the connections.
         m_server->Shutdown(std::chrono::system_clock::now());
-        spdlog::info("shutdown complete duration_ms={:.3f}",
-                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
-                                                               start)
-                         .count());
+        spdlog::info(
+            "shutdown complete duration_ms={:.3f}",
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count());
     });
 }
 

@@ -19,7 +19,7 @@ namespace proxima::server {
 void configure_logging(const std::string& level);
 
 class Daemon {
-public:
+  public:
     explicit Daemon(ServerConfig config);
     ~Daemon();
     Daemon(const Daemon&) = delete;
@@ -37,7 +37,7 @@ public:
 
     ProximityService& service() { return *m_service; }
 
-private:
+  private:
     ServerConfig m_config;
     std::unique_ptr<ProximityService> m_service;  // outlives m_server, as gRPC requires
     std::unique_ptr<grpc::Server> m_server;

@@ -25,8 +25,7 @@ Status limit_status(const std::string& scene_id, const char* what, std::uint64_t
                     const char* limit_name, std::uint64_t limit) {
     return {StatusCode::resource_exhausted,
             "scene " + scene_id + " would hold " + std::to_string(after) + " " + what +
-                " after this change, over the limit " + limit_name + " = " +
-                std::to_string(limit)};
+                " after this change, over the limit " + limit_name + " = " + std::to_string(limit)};
 }
 
 }  // namespace
@@ -161,6 +160,14 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     out->set_scene_id(entry.id);
     out->set_frame(frame.frame());
     encode_frame_result(scene, changes.value(), result.value(), decoded->self_points, out);
+    // gRPC would refuse to send it anyway; saying why here gives the client something to act on.
+    if (const auto bytes = out->ByteSizeLong(); bytes > limits.max_message_bytes) {
+        return {StatusCode::resource_exhausted,
+                "the result of frame " + std::to_string(frame.frame()) + " is " +
+                    std::to_string(bytes) + " bytes, over the limit max-message-bytes = " +
+                    std::to_string(limits.max_message_bytes) +
+                    " (request fewer queries, no self_points, or raise the limit)"};
+    }
     out->mutable_stats()->set_server_seconds(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     return {};

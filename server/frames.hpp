@@ -22,7 +22,8 @@ namespace proxima::server {
 // name the request field and index ("positions[2] (object 7)"), the object, and the limit.
 // `additions_field` is the request field the additions came from ("additions" in a Frame).
 Status validate_update(const Scene& scene, const SceneUpdate& update, const Limits& limits,
-                       const std::string& scene_id, const std::string& additions_field = "additions");
+                       const std::string& scene_id,
+                       const std::string& additions_field = "additions");
 
 // The status a stopped token reports, for work refused before it starts.
 Status stopped_status(const CancelToken& cancel);

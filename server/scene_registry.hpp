@@ -25,9 +25,9 @@ struct SceneEntry {
     const std::string name;
     const bool stream_owned;
 
-    std::mutex mutex;         // held for a whole frame, an upload's apply, a describe
-    ProximityEngine engine;   // guarded by mutex
-    std::uint64_t frames = 0; // guarded by mutex: frames applied so far
+    std::mutex mutex;          // held for a whole frame, an upload's apply, a describe
+    ProximityEngine engine;    // guarded by mutex
+    std::uint64_t frames = 0;  // guarded by mutex: frames applied so far
 
     // Set when the scene leaves the registry; a frame that holds the entry already may finish,
     // later ones fail with NOT_FOUND. Atomic so DeleteScene need not wait for a running frame.
@@ -43,7 +43,7 @@ struct SceneEntry {
 };
 
 class SceneRegistry {
-public:
+  public:
     explicit SceneRegistry(std::uint64_t max_scenes);
 
     // A new, unregistered entry with a fresh random-looking id (16 hex digits). Ids are random
@@ -61,7 +61,7 @@ public:
     std::size_t size() const;
     std::uint64_t max_scenes() const { return m_max_scenes; }
 
-private:
+  private:
     Status full_status() const;
 
     const std::uint64_t m_max_scenes;

@@ -84,8 +84,7 @@ void apply_deadline(CancelToken& token, const grpc::CallbackServerContext& conte
     if (deadline > now + std::chrono::hours(24 * 365)) {
         return;
     }
-    token.set_deadline(Clock::now() +
-                       std::chrono::duration_cast<Clock::duration>(deadline - now));
+    token.set_deadline(Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - now));
 }
 
 // Exceptions never cross into gRPC: the engine throws only for bugs and exhausted memory.
@@ -105,17 +104,18 @@ Status guarded(Fn&& fn) {
 void log_call(const char* method, const std::string& peer, const std::string& scene,
               Clock::time_point start, const Status& status, const std::string& extra = {}) {
     const double ms = milliseconds_since(start);
-    const auto level = status.ok() ? spdlog::level::debug
-                       : (status.code() == StatusCode::cancelled ||
-                          status.code() == StatusCode::deadline_exceeded)
-                           ? spdlog::level::info
-                           : spdlog::level::warn;
+    const auto level =
+        status.ok() ? spdlog::level::debug
+        : (status.code() == StatusCode::cancelled || status.code() == StatusCode::deadline_exceeded)
+            ? spdlog::level::info
+            : spdlog::level::warn;
     if (status.ok()) {
         spdlog::log(level, "call method={} peer={} scene={} status=OK duration_ms={:.3f}{}", method,
                     peer, scene.empty() ? "-" : scene, ms, extra);
     } else {
-        spdlog::log(level, "rejected method={} peer={} scene={} status={} duration_ms={:.3f}{} "
-                           "message=\"{}\"",
+        spdlog::log(level,
+                    "rejected method={} peer={} scene={} status={} duration_ms={:.3f}{} "
+                    "message=\"{}\"",
                     method, peer, scene.empty() ? "-" : scene, status_code_name(status.code()), ms,
                     extra, status.message());
     }
@@ -142,11 +142,14 @@ Status unknown_scene(const std::string& id) {
 // UNAVAILABLE and refused() tells the method to return without doing anything. (gRPC runs OnDone
 // only after the method has returned the reactor, so reading refused() is safe.)
 class UnaryCall final : public grpc::ServerUnaryReactor {
-public:
+  public:
     UnaryCall(ProximityService::Shared& shared, grpc::CallbackServerContext* context,
               const char* method, std::string scene)
-        : m_shared(shared), m_method(method), m_peer(context->peer()),
-          m_scene(std::move(scene)), m_start(Clock::now()) {
+        : m_shared(shared),
+          m_method(method),
+          m_peer(context->peer()),
+          m_scene(std::move(scene)),
+          m_start(Clock::now()) {
         apply_deadline(m_cancel, *context);
         m_refused = !m_shared.enter_call();
         if (m_refused) {
@@ -169,7 +172,7 @@ public:
         delete this;
     }
 
-private:
+  private:
     ProximityService::Shared& m_shared;
     bool m_refused = false;
     const char* m_method;
@@ -184,10 +187,13 @@ private:
 // is buffered); the object is built and added on the worker pool once the client half-closes with
 // exactly the announced bytes.
 class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
-public:
+  public:
     UploadReactor(ProximityService::Shared& shared, grpc::CallbackServerContext* context,
                   v1::ObjectInfo* response)
-        : m_shared(shared), m_context(context), m_response(response), m_peer(context->peer()),
+        : m_shared(shared),
+          m_context(context),
+          m_response(response),
+          m_peer(context->peer()),
           m_start(Clock::now()) {
         if (!m_shared.enter_call()) {
             complete(shutting_down());
@@ -215,7 +221,7 @@ public:
         delete this;
     }
 
-private:
+  private:
     Status take_chunk() {
         switch (m_chunk.part_case()) {
             case v1::UploadChunk::kHeader:
@@ -227,11 +233,12 @@ private:
                 return append(m_chunk.vertex_bytes(), m_vertex_bytes, m_expected_vertex_bytes,
                               "vertex", "vertex_count", m_header.vertex_count());
             case v1::UploadChunk::kIndexBytes:
-                return append(m_chunk.index_bytes(), m_index_bytes, m_expected_index_bytes,
-                              "index", "triangle_count", m_header.triangle_count());
+                return append(m_chunk.index_bytes(), m_index_bytes, m_expected_index_bytes, "index",
+                              "triangle_count", m_header.triangle_count());
             default:
-                return invalid_argument("upload: an empty chunk (set header, vertex_bytes or "
-                                        "index_bytes)");
+                return invalid_argument(
+                    "upload: an empty chunk (set header, vertex_bytes or "
+                    "index_bytes)");
         }
     }
 
@@ -249,12 +256,14 @@ private:
         }
         const std::size_t stride = vertex_stride(header.type());
         if (stride == 0) {
-            return invalid_argument(label() + ": header.type must be SCALAR_TYPE_FLOAT32 or "
-                                              "SCALAR_TYPE_FLOAT64");
+            return invalid_argument(label() +
+                                    ": header.type must be SCALAR_TYPE_FLOAT32 or "
+                                    "SCALAR_TYPE_FLOAT64");
         }
         if (header.triangle_count() == 0) {
-            return invalid_argument(label() + ": header.triangle_count is 0 (a mesh needs at "
-                                              "least one triangle)");
+            return invalid_argument(label() +
+                                    ": header.triangle_count is 0 (a mesh needs at "
+                                    "least one triangle)");
         }
         // Early limit checks from the scene's published sizes; add_objects repeats them under
         // the scene's mutex.
@@ -269,8 +278,7 @@ private:
         const auto triangles = entry->triangle_count.load() + header.triangle_count();
         if (triangles > limits.max_triangles_per_scene) {
             return {StatusCode::resource_exhausted,
-                    label() + ": scene " + m_scene_id + " would hold " +
-                        std::to_string(triangles) +
+                    label() + ": scene " + m_scene_id + " would hold " + std::to_string(triangles) +
                         " triangles, over the limit max-triangles-per-scene = " +
                         std::to_string(limits.max_triangles_per_scene)};
         }
@@ -390,7 +398,7 @@ private:
 // maybe_finish_locked(), and only when no worker task runs and no write is outstanding; OnDone
 // takes m_mu once before deleting the reactor, so the thread that called Finish has let go.
 class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::FrameResult> {
-public:
+  public:
     FrameStreamReactor(ProximityService::Shared& shared, grpc::CallbackServerContext* context)
         : m_shared(shared), m_peer(context->peer()), m_start(Clock::now()) {
         apply_deadline(m_cancel, *context);
@@ -455,18 +463,24 @@ public:
         { std::lock_guard lock(m_mu); }  // the thread that called Finish has released m_mu
         // The scene goes before the stream count drops, so a client that sees live_streams back
         // to its old value also sees live_scenes back.
+        const std::string scene_id = m_scene ? m_scene->id : "";
         if (m_owns_scene && m_scene) {
-            m_shared.scenes.erase(m_scene->id);
+            m_shared.scenes.erase(scene_id);
+        }
+        // Freeing a large engine takes a while: a worker does it, not gRPC's callback thread.
+        if (m_scene) {
+            m_shared.pool.submit([doomed = std::move(m_scene)] {});
         }
         m_shared.leave_call(this);
         const std::string extra = " frames=" + std::to_string(m_frames_answered) +
                                   " owned_scene=" + (m_owns_scene ? "true" : "false");
         if (m_final.ok()) {
-            spdlog::info("stream end method=StreamFrames peer={} scene={} status=OK "
-                         "duration_ms={:.3f}{}",
-                         m_peer, m_scene ? m_scene->id : "-", milliseconds_since(m_start), extra);
+            spdlog::info(
+                "stream end method=StreamFrames peer={} scene={} status=OK "
+                "duration_ms={:.3f}{}",
+                m_peer, scene_id.empty() ? "-" : scene_id, milliseconds_since(m_start), extra);
         } else {
-            log_call("StreamFrames", m_peer, m_scene ? m_scene->id : "", m_start, m_final, extra);
+            log_call("StreamFrames", m_peer, scene_id, m_start, m_final, extra);
         }
         delete this;
     }
@@ -478,7 +492,7 @@ public:
         maybe_finish_locked();
     }
 
-private:
+  private:
     bool stopped_locked() const { return m_cancelled || m_write_failed || m_error.has_value(); }
 
     void start_read_if_room_locked() {
@@ -552,9 +566,9 @@ private:
         const auto& limits = m_shared.config.limits;
         if (m_scene) {
             if (!frame.scene_id().empty() && frame.scene_id() != m_scene->id) {
-                return invalid_argument("frame " + std::to_string(frame.frame()) +
-                                        " names scene " + frame.scene_id() +
-                                        " but this stream is bound to scene " + m_scene->id);
+                return invalid_argument("frame " + std::to_string(frame.frame()) + " names scene " +
+                                        frame.scene_id() + " but this stream is bound to scene " +
+                                        m_scene->id);
             }
             return run_frame(*m_scene, frame, limits, &m_cancel, out);
         }
@@ -617,7 +631,9 @@ ProximityService::ProximityService(const ServerConfig& config)
 
 ProximityService::~ProximityService() = default;
 
-std::size_t ProximityService::live_scenes() const { return m_shared->scenes.size(); }
+std::size_t ProximityService::live_scenes() const {
+    return m_shared->scenes.size();
+}
 
 std::size_t ProximityService::live_streams() const {
     std::lock_guard lock(m_shared->calls_mu);
@@ -744,7 +760,9 @@ grpc::ServerUnaryReactor* ProximityService::DeleteScene(grpc::CallbackServerCont
     }
     // Freeing a large engine takes a while: let a worker do it, not gRPC's callback thread. (A
     // frame still holding the scene frees it when it ends instead.)
-    m_shared->pool.submit([doomed = std::move(entry)] {});
+    if (entry) {
+        m_shared->pool.submit([doomed = std::move(entry)] {});
+    }
     call->complete(s);
     return call;
 }
@@ -772,8 +790,7 @@ grpc::ServerUnaryReactor* ProximityService::Query(grpc::CallbackServerContext* c
             if (!entry) {
                 return unknown_scene(request->scene_id());
             }
-            return run_frame(*entry, *request, m_shared->config.limits, &call->cancel(),
-                             response);
+            return run_frame(*entry, *request, m_shared->config.limits, &call->cancel(), response);
         }));
     });
     return call;

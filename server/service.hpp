@@ -19,7 +19,7 @@ namespace proxima::server {
 inline constexpr const char* PROXIMITY_BACKEND = "cpu (bvh, brute)";
 
 class ProximityService final : public v1::Proximity::CallbackService {
-public:
+  public:
     explicit ProximityService(const ServerConfig& config);
     ~ProximityService() override;
 
@@ -56,7 +56,7 @@ public:
 
     struct Shared;  // state the reactors share; defined in service.cpp
 
-private:
+  private:
     std::unique_ptr<Shared> m_shared;
 };
 

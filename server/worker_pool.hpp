@@ -15,7 +15,7 @@
 namespace proxima::server {
 
 class WorkerPool {
-public:
+  public:
     explicit WorkerPool(std::size_t threads);
     ~WorkerPool();  // runs what is queued, then joins
     WorkerPool(const WorkerPool&) = delete;
@@ -25,7 +25,7 @@ public:
     void submit(std::function<void()> task);
     std::size_t size() const { return m_threads.size(); }
 
-private:
+  private:
     void run();
 
     std::mutex m_mu;

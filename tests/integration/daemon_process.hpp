@@ -20,7 +20,7 @@
 namespace proxima::test {
 
 class DaemonProcess {
-public:
+  public:
     // Starts `PROXIMAD_PATH --listen 127.0.0.1:0 extra...` and waits (up to `timeout`) for the
     // `listening on` line. On failure `ok()` is false and `error()` says why.
     explicit DaemonProcess(std::vector<std::string> extra = {},
@@ -105,11 +105,9 @@ public:
         return m_exit_status;
     }
 
-    bool running() {
-        return m_pid > 0 && !wait_exit(std::chrono::milliseconds(0)).has_value();
-    }
+    bool running() { return m_pid > 0 && !wait_exit(std::chrono::milliseconds(0)).has_value(); }
 
-private:
+  private:
     void read_first_line(std::chrono::milliseconds timeout) {
         const auto until = std::chrono::steady_clock::now() + timeout;
         std::string line;

@@ -1,8 +1,8 @@
 // proximad as a process, driven with the generated stub: start-up contract, health, config,
 // validation of malformed requests (each rejected whole with the right code, the scene left as it
 // was), limits, chunked uploads, pipelined frames and the SIGTERM drain.
-#include <gtest/gtest.h>
 #include <google/protobuf/util/message_differencer.h>
+#include <gtest/gtest.h>
 
 #include <sys/wait.h>
 
@@ -233,16 +233,16 @@ TEST(Daemon, MalformedRequestsLeaveTheSceneUnchanged) {
         p->mutable_vertices()->mutable_data()->pop_back();
     }
     {
-        auto& f = add("float32 buffer size", grpc::StatusCode::INVALID_ARGUMENT,
-                      "not a multiple of 12");
+        auto& f =
+            add("float32 buffer size", grpc::StatusCode::INVALID_ARGUMENT, "not a multiple of 12");
         auto* p = f.add_positions();
         p->set_object_id(a);
         p->mutable_vertices()->set_type(v1::SCALAR_TYPE_FLOAT32);
         p->mutable_vertices()->set_data(std::string(12 * 8 + 4, '\0'));
     }
     {
-        auto& f = add("index buffer size", grpc::StatusCode::INVALID_ARGUMENT,
-                      "not a multiple of 12");
+        auto& f =
+            add("index buffer size", grpc::StatusCode::INVALID_ARGUMENT, "not a multiple of 12");
         auto m = unit_box("torn", 10);
         set_mesh(m, f.add_additions());
         f.mutable_additions(0)->mutable_indices()->resize(12 * 5 + 8);
@@ -321,19 +321,64 @@ TEST(Daemon, OversizedMessageIsResourceExhausted) {
     // Still serving, and a message under the limit goes through.
     ASSERT_TRUE(fx.create({unit_box("small", 0)}, &scene).ok());
     EXPECT_EQ(fx.info().live_scenes(), 1u);
+
+    // The limit holds for answers too: self distances with points of ~2000 triangles (~115 KB,
+    // from a request of ~48 KB).
+    ASSERT_TRUE(fx.create({ball("medium", {0, 0, 0}, 32, 32)}, &scene).ok());
+    v1::Frame frame;
+    frame.set_scene_id(scene.scene_id());
+    frame.mutable_queries()->set_self(true);
+    frame.mutable_queries()->set_self_points(true);
+    v1::FrameResult result;
+    const auto big_answer = fx.query(frame, &result);
+    EXPECT_EQ(big_answer.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+        << big_answer.error_message();
+    EXPECT_NE(big_answer.error_message().find("max-message-bytes = 65536"), std::string::npos)
+        << big_answer.error_message();
+    frame.mutable_queries()->set_self_points(false);
+    frame.mutable_queries()->set_self(false);
+    frame.mutable_queries()->set_separation(true);
+    EXPECT_TRUE(fx.query(frame, &result).ok());
+}
+
+TEST(Daemon, BusyPortIsAnError) {
+    Fixture first;
+    ASSERT_TRUE(first.daemon.ok()) << first.daemon.error();
+    // Not the fixture (which listens on port 0): the same port as the first daemon.
+    int out[2];
+    ASSERT_EQ(pipe(out), 0);
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGKILL);
+        dup2(out[1], STDOUT_FILENO);
+        const std::string listen = first.daemon.address();
+        execl(PROXIMAD_PATH, PROXIMAD_PATH, "--listen", listen.c_str(), "--log-level", "off",
+              static_cast<char*>(nullptr));
+        _exit(127);
+    }
+    close(out[1]);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    char buffer[64];
+    EXPECT_EQ(read(out[0], buffer, sizeof(buffer)), 0) << "a second daemon printed a line";
+    close(out[0]);
+    EXPECT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 1);
+    EXPECT_EQ(first.info().api(), "proxima.v1");  // the first one is unaffected
 }
 
 TEST(Daemon, LimitsOnScenesObjectsAndTriangles) {
-    Fixture fx({"--max-scenes", "2", "--max-objects-per-scene", "3", "--max-triangles-per-scene",
-                "40"});
+    Fixture fx(
+        {"--max-scenes", "2", "--max-objects-per-scene", "3", "--max-triangles-per-scene", "40"});
     ASSERT_TRUE(fx.daemon.ok()) << fx.daemon.error();
     v1::SceneInfo s1;
     v1::SceneInfo s2;
     v1::SceneInfo s3;
 
     // Objects: four boxes in one scene is one too many.
-    auto st = fx.create({unit_box("a", 0), unit_box("b", 2), unit_box("c", 4), unit_box("d", 6)},
-                        &s1);
+    auto st =
+        fx.create({unit_box("a", 0), unit_box("b", 2), unit_box("c", 4), unit_box("d", 6)}, &s1);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
     EXPECT_NE(st.error_message().find("max-objects-per-scene = 3"), std::string::npos)
         << st.error_message();
@@ -400,7 +445,8 @@ TEST(Daemon, ChunkedUploadAddsOnlyCompleteValidObjects) {
             h.mutable_header()->set_scene_id(scene.scene_id());
             h.mutable_header()->set_name(big.name);
             h.mutable_header()->set_type(v1::SCALAR_TYPE_FLOAT64);
-            h.mutable_header()->set_vertex_count(static_cast<std::uint32_t>(big.mesh.vertices.size()));
+            h.mutable_header()->set_vertex_count(
+                static_cast<std::uint32_t>(big.mesh.vertices.size()));
             h.mutable_header()->set_triangle_count(
                 static_cast<std::uint32_t>(big.mesh.triangles.size()));
             writer->Write(h);

@@ -31,8 +31,8 @@ std::unique_ptr<Client> connect(const DaemonProcess& daemon, client::ConnectOpti
     return c.ok() ? std::move(c).value() : nullptr;
 }
 
-void expect_same_pairs(const std::vector<FeaturePair>& remote, const std::vector<FeaturePair>& local,
-                       const char* what) {
+void expect_same_pairs(const std::vector<FeaturePair>& remote,
+                       const std::vector<FeaturePair>& local, const char* what) {
     ASSERT_EQ(remote.size(), local.size()) << what;
     for (std::size_t i = 0; i < local.size(); ++i) {
         SCOPED_TRACE(std::string(what) + " pair " + std::to_string(i));

@@ -1,0 +1,257 @@
+// proxima_stream_bench: what the frame stream costs on loopback, apart from the geometry work.
+//   1. Round-trip overhead per frame: one deforming sheet of 15K or 150K vertices, lockstep
+//      frames that only update positions (no query), float32 and float64 buffers; overhead =
+//      client round trip - the server's own time (decode, validate, apply, encode).
+//   2. Throughput: 1, 8 and 32 concurrent streams, each its own scene (the 'bowl' scene,
+//      separation query), lockstep frames for a fixed time; total frames per second.
+// Starts its own proximad on 127.0.0.1:0. `--quick` is the CI smoke run.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "client/proxima_client.hpp"
+#include "proxima/scenes/procedural.hpp"
+
+namespace {
+
+using namespace proxima;
+using Clock = std::chrono::steady_clock;
+
+struct Daemon {
+    pid_t pid = -1;
+    std::string address;
+    Daemon() {
+        int out[2];
+        if (pipe(out) != 0) {
+            std::perror("pipe");
+            std::exit(1);
+        }
+        pid = fork();
+        if (pid == 0) {
+            dup2(out[1], STDOUT_FILENO);
+            close(out[0]);
+            close(out[1]);
+            execl(PROXIMAD_PATH, PROXIMAD_PATH, "--listen", "127.0.0.1:0", "--log-level", "warn",
+                  static_cast<char*>(nullptr));
+            std::perror("exec proximad");
+            _exit(127);
+        }
+        close(out[1]);
+        std::string line;
+        char c;
+        while (read(out[0], &c, 1) == 1 && c != '\n') {
+            line += c;
+        }
+        close(out[0]);
+        const std::string prefix = "listening on ";
+        if (line.rfind(prefix, 0) != 0) {
+            std::fprintf(stderr, "proximad did not start (first line: '%s')\n", line.c_str());
+            std::exit(1);
+        }
+        address = line.substr(prefix.size());
+    }
+    ~Daemon() {
+        if (pid > 0) {
+            kill(pid, SIGTERM);
+            int status = 0;
+            waitpid(pid, &status, 0);
+        }
+    }
+};
+
+TriangleMesh sheet(int nx, int ny) {
+    TriangleMesh m;
+    for (int j = 0; j < ny; ++j) {
+        for (int i = 0; i < nx; ++i) {
+            m.vertices.push_back({i * 0.01, j * 0.01, 0.0});
+        }
+    }
+    for (int j = 0; j + 1 < ny; ++j) {
+        for (int i = 0; i + 1 < nx; ++i) {
+            const auto a = static_cast<std::uint32_t>(j * nx + i);
+            m.triangles.push_back({a, a + 1, a + static_cast<std::uint32_t>(nx) + 1});
+            m.triangles.push_back({a, a + static_cast<std::uint32_t>(nx) + 1, a + static_cast<std::uint32_t>(nx)});
+        }
+    }
+    return m;
+}
+
+double percentile(std::vector<double> v, double p) {
+    if (v.empty()) {
+        return 0;
+    }
+    std::sort(v.begin(), v.end());
+    return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+void overhead(const std::string& address, int nx, int ny, bool f32, int frames) {
+    client::ConnectOptions opts;
+    opts.float32_vertices = f32;
+    opts.inline_mesh_bytes = 64u << 20;
+    auto c = client::Client::connect(address, opts);
+    if (!c.ok()) {
+        std::fprintf(stderr, "connect: %s\n", c.status().to_string().c_str());
+        std::exit(1);
+    }
+    auto mesh = sheet(nx, ny);
+    auto scene = c.value()->create_scene("overhead", {{"sheet", mesh}});
+    if (!scene.ok()) {
+        std::fprintf(stderr, "create: %s\n", scene.status().to_string().c_str());
+        std::exit(1);
+    }
+    const ObjectId id = scene->objects.at(0).id;
+    auto stream = c.value()->open_stream(scene->scene_id);
+    if (!stream.ok()) {
+        std::fprintf(stderr, "stream: %s\n", stream.status().to_string().c_str());
+        std::exit(1);
+    }
+    std::vector<double> rtt, over, server;
+    for (int k = 0; k < frames; ++k) {
+        client::FrameRequest f;
+        f.frame = static_cast<std::uint64_t>(k);
+        f.queries.separation = false;
+        auto v = mesh.vertices;
+        for (auto& p : v) {
+            p.z = 0.001 * std::sin(0.1 * k + p.x);
+        }
+        f.update.positions.push_back({id, std::move(v)});
+        // Building the frame is the simulator's work, not the stream's: start the clock here.
+        const auto t0 = Clock::now();
+        if (Status s = stream.value()->send(f); !s.ok()) {
+            std::fprintf(stderr, "send: %s\n", s.to_string().c_str());
+            std::exit(1);
+        }
+        auto r = stream.value()->receive();
+        const double dt = std::chrono::duration<double>(Clock::now() - t0).count();
+        if (!r.ok()) {
+            std::fprintf(stderr, "receive: %s\n", r.status().to_string().c_str());
+            std::exit(1);
+        }
+        if (k >= 3) {  // warm-up frames excluded
+            rtt.push_back(dt * 1e3);
+            server.push_back(r->server_seconds * 1e3);
+            over.push_back((dt - r->server_seconds) * 1e3);
+        }
+    }
+    (void)stream.value()->finish();
+    (void)c.value()->delete_scene(scene->scene_id);
+    std::printf("| %zu | %s | %.3f | %.3f | %.3f | %.3f |\n", mesh.vertices.size(),
+                f32 ? "float32" : "float64", percentile(rtt, 0.5), percentile(server, 0.5),
+                percentile(over, 0.5), percentile(over, 0.99));
+}
+
+void throughput(const std::string& address, int streams, double seconds) {
+    std::atomic<std::uint64_t> frames{0};
+    std::atomic<bool> failed{false};
+    std::vector<std::thread> threads;
+    std::vector<std::vector<double>> latency(static_cast<std::size_t>(streams));
+    const auto stop = Clock::now() + std::chrono::duration<double>(seconds);
+    for (int s = 0; s < streams; ++s) {
+        threads.emplace_back([&, s] {
+            auto c = client::Client::connect(address);
+            if (!c.ok()) {
+                failed = true;
+                return;
+            }
+            auto sc = scenes::bowl(100000);
+            auto remote = c.value()->create_scene("bowl", sc.initial);
+            if (!remote.ok()) {
+                failed = true;
+                return;
+            }
+            Scene mirror;
+            SceneUpdate first;
+            first.additions = sc.initial;
+            (void)mirror.apply(first);
+            auto stream = c.value()->open_stream(remote->scene_id);
+            if (!stream.ok()) {
+                failed = true;
+                return;
+            }
+            for (std::size_t k = 1; Clock::now() < stop; ++k) {
+                SceneUpdate local = sc.step(k, mirror);
+                client::FrameRequest f;
+                f.frame = k;
+                f.queries.separation = true;
+                f.update = local;
+                // The bowl scene keeps its topology: local and remote ids correspond by position.
+                for (auto& p : f.update.positions) {
+                    p.object = remote->objects[static_cast<std::size_t>(mirror.index_of(p.object))].id;
+                }
+                (void)mirror.apply(std::move(local));
+                const auto t0 = Clock::now();
+                if (!stream.value()->send(f).ok()) {
+                    failed = true;
+                    return;
+                }
+                auto r = stream.value()->receive();
+                if (!r.ok()) {
+                    failed = true;
+                    return;
+                }
+                latency[static_cast<std::size_t>(s)].push_back(
+                    std::chrono::duration<double>(Clock::now() - t0).count() * 1e3);
+                ++frames;
+            }
+            (void)stream.value()->finish();
+            (void)c.value()->delete_scene(remote->scene_id);
+        });
+    }
+    for (auto& t : threads) {
+        t.join();
+    }
+    if (failed) {
+        std::fprintf(stderr, "a stream failed\n");
+        std::exit(1);
+    }
+    std::vector<double> all;
+    for (auto& l : latency) {
+        all.insert(all.end(), l.begin(), l.end());
+    }
+    std::printf("| %d | %.1f | %.2f | %.2f |\n", streams, frames.load() / seconds,
+                percentile(all, 0.5), percentile(all, 0.99));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    bool quick = false;
+    for (int i = 1; i < argc; ++i) {
+        if (std::strcmp(argv[i], "--quick") == 0) {
+            quick = true;
+        } else {
+            std::fprintf(stderr, "usage: %s [--quick]\n", argv[0]);
+            return 2;
+        }
+    }
+    Daemon daemon;
+    std::printf("proximad at %s; %u hardware threads\n\n", daemon.address.c_str(),
+                std::thread::hardware_concurrency());
+    std::printf("Round trip per frame, positions only, lockstep (ms; overhead = round trip - "
+                "server time)\n\n");
+    std::printf("| vertices | buffer | round trip p50 | server p50 | overhead p50 | overhead p99 |\n");
+    std::printf("|---|---|---|---|---|---|\n");
+    const int frames = quick ? 8 : 200;
+    for (bool f32 : {true, false}) {
+        overhead(daemon.address, 150, 100, f32, frames);    // 15,000 vertices
+        overhead(daemon.address, 500, 300, f32, quick ? 5 : 60);  // 150,000 vertices
+    }
+    std::printf("\nConcurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "
+                "frame, lockstep\n\n");
+    std::printf("| streams | frames/s (all streams) | latency p50 ms | latency p99 ms |\n");
+    std::printf("|---|---|---|---|\n");
+    for (int s : {1, 8, 32}) {
+        throughput(daemon.address, s, quick ? 0.5 : 5.0);
+    }
+    return 0;
+}
