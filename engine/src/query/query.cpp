@@ -539,6 +539,14 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     auto& stats = result.stats;
     Culler& culler = culler_for(request.culler);
     stats.culler = culler_name(culler.kind());
+    if (!request.separation && !request.self && !request.collisions && !request.tolerance &&
+        !request.pns) {
+        // Nothing asked: a frame that only moves vertices. Refitting now would be wasted (the
+        // next query refits for the positions it sees).
+        stats.brute_force_tests = 0;
+        stats.total_seconds = seconds_since(t_start);
+        return result;
+    }
 
     auto t0 = Clock::now();
     culler.prepare(m_scene);
