@@ -87,8 +87,8 @@ void print_text(const std::vector<client::InputObject>& objects, const QueryResu
         std::printf("tolerance %.9g: %zu triangle pairs within\n", args.tolerance,
                     r.tolerance.size());
     }
-    std::printf("culler %s, %llu exact tests (brute force: %llu), %.3f ms\n", r.stats.culler.c_str(),
-                static_cast<unsigned long long>(r.stats.exact_tests),
+    std::printf("culler %s, %llu exact tests (brute force: %llu), %.3f ms\n",
+                r.stats.culler.c_str(), static_cast<unsigned long long>(r.stats.exact_tests),
                 static_cast<unsigned long long>(r.stats.brute_force_tests),
                 r.stats.total_seconds * 1e3);
 }
@@ -127,9 +127,9 @@ Status check_remote_result(const std::vector<client::InputObject>& objects,
     }
     for (std::size_t i = 0; i < r.separation.size(); ++i) {
         const auto& s = r.separation[i];
-        if (s.other != NO_OBJECT && (!triangle_ok(i, s.triangle) ||
-                                     !triangle_ok(static_cast<std::size_t>(s.other),
-                                                  s.other_triangle))) {
+        if (s.other != NO_OBJECT &&
+            (!triangle_ok(i, s.triangle) ||
+             !triangle_ok(static_cast<std::size_t>(s.other), s.other_triangle))) {
             return bad("separation of object " + std::to_string(i));
         }
     }
@@ -141,8 +141,7 @@ Status check_remote_result(const std::vector<client::InputObject>& objects,
             return bad("self distances of object " + std::to_string(i));
         }
         for (const auto& e : r.self[i]) {
-            if (e.closest != NO_OBJECT &&
-                !triangle_ok(i, static_cast<std::uint32_t>(e.closest))) {
+            if (e.closest != NO_OBJECT && !triangle_ok(i, static_cast<std::uint32_t>(e.closest))) {
                 return bad("self distances of object " + std::to_string(i));
             }
         }
@@ -248,16 +247,15 @@ void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
     }
     const auto& st = result.stats;
     if (args.json) {
-        nlohmann::json j = {{"frame", k},
-                            {"objects", objects},
-                            {"triangles", triangles},
-                            {"min_separation", std::isfinite(min_sep) ? nlohmann::json(min_sep)
-                                                                      : nlohmann::json()},
-                            {"min_self_distance", std::isfinite(min_self)
-                                                      ? nlohmann::json(min_self)
-                                                      : nlohmann::json()},
-                            {"collisions", result.collisions.size()},
-                            {"stats", client::stats_json(st)}};
+        nlohmann::json j = {
+            {"frame", k},
+            {"objects", objects},
+            {"triangles", triangles},
+            {"min_separation", std::isfinite(min_sep) ? nlohmann::json(min_sep) : nlohmann::json()},
+            {"min_self_distance",
+             std::isfinite(min_self) ? nlohmann::json(min_self) : nlohmann::json()},
+            {"collisions", result.collisions.size()},
+            {"stats", client::stats_json(st)}};
         if (round_trip_ms) {
             j["round_trip_ms"] = *round_trip_ms;
         }
@@ -265,8 +263,8 @@ void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
         return;
     }
     std::printf("%5zu %7zu %9zu %12.6g %12.6g %10zu %12llu %9.2f", k, objects, triangles, min_sep,
-                min_self, result.collisions.size(),
-                static_cast<unsigned long long>(st.exact_tests), st.total_seconds * 1e3);
+                min_self, result.collisions.size(), static_cast<unsigned long long>(st.exact_tests),
+                st.total_seconds * 1e3);
     if (round_trip_ms) {
         std::printf(" %9.2f", *round_trip_ms);
     }
@@ -282,9 +280,10 @@ void print_demo_header(const DemoArgs& args, const scenes::ProceduralScene& scen
     if (args.server.empty()) {
         std::printf("scene %s: %s\n", scene.name.c_str(), scene.description.c_str());
     } else {
-        std::printf("scene %s: %s\nstreamed to proximad at %s (ms: engine time on the daemon, "
-                    "rtt-ms: round trip)\n",
-                    scene.name.c_str(), scene.description.c_str(), args.server.c_str());
+        std::printf(
+            "scene %s: %s\nstreamed to proximad at %s (ms: engine time on the daemon, "
+            "rtt-ms: round trip)\n",
+            scene.name.c_str(), scene.description.c_str(), args.server.c_str());
     }
     std::printf("%5s %7s %9s %12s %12s %10s %12s %9s", "frame", "objects", "triangles",
                 "min-separ.", "min-self", "collisions", "exact-tests", "ms");
@@ -323,7 +322,7 @@ int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
 // are given (our mirror); the daemon numbers its objects itself, so every id in an update is
 // translated, and the ids the daemon gives new objects are learned from each result.
 class IdMap {
-public:
+  public:
     StatusOr<ObjectId> remote(ObjectId local) const {
         auto it = m_remote.find(local);
         if (it == m_remote.end()) {
@@ -380,11 +379,10 @@ public:
         }
         for (std::size_t i = 0; i < local.fragment_ids.size(); ++i) {
             if (remote.fragment_ids[i].size() != local.fragment_ids[i].size()) {
-                return {StatusCode::internal, "the daemon reported " +
-                                                  std::to_string(remote.fragment_ids[i].size()) +
-                                                  " fragment ids for topology change " +
-                                                  std::to_string(i) + " of " +
-                                                  std::to_string(local.fragment_ids[i].size())};
+                return {StatusCode::internal,
+                        "the daemon reported " + std::to_string(remote.fragment_ids[i].size()) +
+                            " fragment ids for topology change " + std::to_string(i) + " of " +
+                            std::to_string(local.fragment_ids[i].size())};
             }
             for (std::size_t j = 0; j < local.fragment_ids[i].size(); ++j) {
                 m_remote[local.fragment_ids[i][j]] = remote.fragment_ids[i][j];
@@ -396,7 +394,7 @@ public:
         return {};
     }
 
-private:
+  private:
     std::unordered_map<ObjectId, ObjectId> m_remote;
 };
 
@@ -521,12 +519,13 @@ int run_info(const InfoArgs& args) {
     std::printf("live:              %llu scenes, %llu streams\n",
                 static_cast<unsigned long long>(i.live_scenes),
                 static_cast<unsigned long long>(i.live_streams));
-    std::printf("limits:            %llu scenes, %llu objects and %llu triangles per scene, "
-                "%llu-byte messages, %u frames in flight per stream\n",
-                static_cast<unsigned long long>(i.max_scenes),
-                static_cast<unsigned long long>(i.max_objects_per_scene),
-                static_cast<unsigned long long>(i.max_triangles_per_scene),
-                static_cast<unsigned long long>(i.max_message_bytes), i.max_frames_in_flight);
+    std::printf(
+        "limits:            %llu scenes, %llu objects and %llu triangles per scene, "
+        "%llu-byte messages, %u frames in flight per stream\n",
+        static_cast<unsigned long long>(i.max_scenes),
+        static_cast<unsigned long long>(i.max_objects_per_scene),
+        static_cast<unsigned long long>(i.max_triangles_per_scene),
+        static_cast<unsigned long long>(i.max_message_bytes), i.max_frames_in_flight);
     return 0;
 }
 
@@ -541,11 +540,10 @@ int main(int argc, char** argv) {
         DistanceArgs dist;
         auto* distance = app.add_subcommand(
             "distance", "Separation, self distance, collisions and tolerance on mesh files");
-        auto* local_flag = distance->add_flag(
-            "--local", dist.local, "Run the engine in this process (the default)");
-        auto* server_opt =
-            distance->add_option("--server", dist.server,
-                                 "Run on the proximad daemon at HOST:PORT instead");
+        auto* local_flag = distance->add_flag("--local", dist.local,
+                                              "Run the engine in this process (the default)");
+        auto* server_opt = distance->add_option("--server", dist.server,
+                                                "Run on the proximad daemon at HOST:PORT instead");
         server_opt->excludes(local_flag);
         distance
             ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
@@ -559,8 +557,9 @@ int main(int argc, char** argv) {
                            "Also: for every triangle, its closest non-adjacent triangle");
         distance->add_flag("--collisions", dist.collisions,
                            "Also: every intersecting triangle pair");
-        distance->add_option("--tolerance", dist.tolerance,
-                             "Also: every triangle pair within this distance")
+        distance
+            ->add_option("--tolerance", dist.tolerance,
+                         "Also: every triangle pair within this distance")
             ->check(CLI::NonNegativeNumber);
         distance->add_flag("--pns", dist.pns,
                            "Also: the culler's candidate pairs for the tolerance (or contact)");
@@ -573,8 +572,7 @@ int main(int argc, char** argv) {
         DemoArgs demo_args;
         auto* demo = app.add_subcommand(
             "demo", "Stream a built-in deforming scene through the engine, frame by frame");
-        demo->add_option("--scene", demo_args.scene,
-                         "skirt, cloth-ball, bowl, ramps or breaking");
+        demo->add_option("--scene", demo_args.scene, "skirt, cloth-ball, bowl, ramps or breaking");
         demo->add_option("--frames", demo_args.frames, "Number of frames")
             ->check(CLI::Range(1, 100000));
         demo->add_option("--culler", demo_args.culler, "auto, brute or bvh")

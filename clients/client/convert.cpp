@@ -47,7 +47,9 @@ void encode_vec3(const Vec3& v, pb::Vec3* out) {
     out->set_z(v.z);
 }
 
-Vec3 decode_vec3(const pb::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+Vec3 decode_vec3(const pb::Vec3& v) {
+    return {v.x(), v.y(), v.z()};
+}
 
 void encode_pairs(const std::vector<FeaturePair>& pairs,
                   google::protobuf::RepeatedPtrField<pb::FeaturePair>* out) {
@@ -80,32 +82,52 @@ Status decode_pairs(const google::protobuf::RepeatedPtrField<pb::FeaturePair>& p
 
 Status from_grpc(const grpc::Status& status) {
     switch (status.error_code()) {
-        case grpc::StatusCode::OK: return {};
+        case grpc::StatusCode::OK:
+            return {};
         case grpc::StatusCode::INVALID_ARGUMENT:
             return {StatusCode::invalid_argument, status.error_message()};
-        case grpc::StatusCode::NOT_FOUND: return {StatusCode::not_found, status.error_message()};
+        case grpc::StatusCode::NOT_FOUND:
+            return {StatusCode::not_found, status.error_message()};
         case grpc::StatusCode::FAILED_PRECONDITION:
             return {StatusCode::failed_precondition, status.error_message()};
         case grpc::StatusCode::RESOURCE_EXHAUSTED:
             return {StatusCode::resource_exhausted, status.error_message()};
-        case grpc::StatusCode::CANCELLED: return {StatusCode::cancelled, status.error_message()};
+        case grpc::StatusCode::CANCELLED:
+            return {StatusCode::cancelled, status.error_message()};
         case grpc::StatusCode::DEADLINE_EXCEEDED:
             return {StatusCode::deadline_exceeded, status.error_message()};
         case grpc::StatusCode::UNAVAILABLE:
             return {StatusCode::unavailable, status.error_message()};
-        case grpc::StatusCode::INTERNAL: return {StatusCode::internal, status.error_message()};
-        default: break;
+        case grpc::StatusCode::INTERNAL:
+            return {StatusCode::internal, status.error_message()};
+        default:
+            break;
     }
     const char* name = "UNKNOWN";
     switch (status.error_code()) {
-        case grpc::StatusCode::ALREADY_EXISTS: name = "ALREADY_EXISTS"; break;
-        case grpc::StatusCode::PERMISSION_DENIED: name = "PERMISSION_DENIED"; break;
-        case grpc::StatusCode::ABORTED: name = "ABORTED"; break;
-        case grpc::StatusCode::OUT_OF_RANGE: name = "OUT_OF_RANGE"; break;
-        case grpc::StatusCode::UNIMPLEMENTED: name = "UNIMPLEMENTED"; break;
-        case grpc::StatusCode::DATA_LOSS: name = "DATA_LOSS"; break;
-        case grpc::StatusCode::UNAUTHENTICATED: name = "UNAUTHENTICATED"; break;
-        default: break;
+        case grpc::StatusCode::ALREADY_EXISTS:
+            name = "ALREADY_EXISTS";
+            break;
+        case grpc::StatusCode::PERMISSION_DENIED:
+            name = "PERMISSION_DENIED";
+            break;
+        case grpc::StatusCode::ABORTED:
+            name = "ABORTED";
+            break;
+        case grpc::StatusCode::OUT_OF_RANGE:
+            name = "OUT_OF_RANGE";
+            break;
+        case grpc::StatusCode::UNIMPLEMENTED:
+            name = "UNIMPLEMENTED";
+            break;
+        case grpc::StatusCode::DATA_LOSS:
+            name = "DATA_LOSS";
+            break;
+        case grpc::StatusCode::UNAUTHENTICATED:
+            name = "UNAUTHENTICATED";
+            break;
+        default:
+            break;
     }
     return {StatusCode::internal, std::string("gRPC ") + name + ": " + status.error_message()};
 }
@@ -113,15 +135,32 @@ Status from_grpc(const grpc::Status& status) {
 grpc::Status to_grpc(const Status& status) {
     grpc::StatusCode code = grpc::StatusCode::INTERNAL;
     switch (status.code()) {
-        case StatusCode::ok: return grpc::Status::OK;
-        case StatusCode::invalid_argument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
-        case StatusCode::not_found: code = grpc::StatusCode::NOT_FOUND; break;
-        case StatusCode::failed_precondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
-        case StatusCode::resource_exhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
-        case StatusCode::cancelled: code = grpc::StatusCode::CANCELLED; break;
-        case StatusCode::deadline_exceeded: code = grpc::StatusCode::DEADLINE_EXCEEDED; break;
-        case StatusCode::unavailable: code = grpc::StatusCode::UNAVAILABLE; break;
-        case StatusCode::internal: code = grpc::StatusCode::INTERNAL; break;
+        case StatusCode::ok:
+            return grpc::Status::OK;
+        case StatusCode::invalid_argument:
+            code = grpc::StatusCode::INVALID_ARGUMENT;
+            break;
+        case StatusCode::not_found:
+            code = grpc::StatusCode::NOT_FOUND;
+            break;
+        case StatusCode::failed_precondition:
+            code = grpc::StatusCode::FAILED_PRECONDITION;
+            break;
+        case StatusCode::resource_exhausted:
+            code = grpc::StatusCode::RESOURCE_EXHAUSTED;
+            break;
+        case StatusCode::cancelled:
+            code = grpc::StatusCode::CANCELLED;
+            break;
+        case StatusCode::deadline_exceeded:
+            code = grpc::StatusCode::DEADLINE_EXCEEDED;
+            break;
+        case StatusCode::unavailable:
+            code = grpc::StatusCode::UNAVAILABLE;
+            break;
+        case StatusCode::internal:
+            code = grpc::StatusCode::INTERNAL;
+            break;
     }
     return {code, status.message()};
 }
@@ -132,9 +171,12 @@ pb::ScalarType scalar_type(bool float32) {
 
 std::size_t vertex_bytes(pb::ScalarType type) {
     switch (type) {
-        case pb::SCALAR_TYPE_FLOAT32: return FLOAT32_VERTEX_BYTES;
-        case pb::SCALAR_TYPE_FLOAT64: return FLOAT64_VERTEX_BYTES;
-        default: return 0;
+        case pb::SCALAR_TYPE_FLOAT32:
+            return FLOAT32_VERTEX_BYTES;
+        case pb::SCALAR_TYPE_FLOAT64:
+            return FLOAT64_VERTEX_BYTES;
+        default:
+            return 0;
     }
 }
 
@@ -289,9 +331,15 @@ void encode_query(const QueryRequest& request, bool self_points, pb::QuerySpec* 
     }
     out->set_pns(request.pns);
     switch (request.culler) {
-        case CullerKind::automatic: out->set_culler(pb::CULLER_AUTO); break;
-        case CullerKind::brute: out->set_culler(pb::CULLER_BRUTE); break;
-        case CullerKind::bvh: out->set_culler(pb::CULLER_BVH); break;
+        case CullerKind::automatic:
+            out->set_culler(pb::CULLER_AUTO);
+            break;
+        case CullerKind::brute:
+            out->set_culler(pb::CULLER_BRUTE);
+            break;
+        case CullerKind::bvh:
+            out->set_culler(pb::CULLER_BVH);
+            break;
     }
     out->set_self_points(self_points);
 }
@@ -306,9 +354,15 @@ StatusOr<QueryRequest> decode_query(const pb::QuerySpec& spec) {
     }
     out.pns = spec.pns();
     switch (spec.culler()) {
-        case pb::CULLER_AUTO: out.culler = CullerKind::automatic; break;
-        case pb::CULLER_BRUTE: out.culler = CullerKind::brute; break;
-        case pb::CULLER_BVH: out.culler = CullerKind::bvh; break;
+        case pb::CULLER_AUTO:
+            out.culler = CullerKind::automatic;
+            break;
+        case pb::CULLER_BRUTE:
+            out.culler = CullerKind::brute;
+            break;
+        case pb::CULLER_BVH:
+            out.culler = CullerKind::bvh;
+            break;
         default:
             return invalid_argument("unknown culler " + std::to_string(spec.culler()) +
                                     " (expected CULLER_AUTO, CULLER_BRUTE or CULLER_BVH)");
@@ -358,9 +412,9 @@ StatusOr<FrameRequest> decode_frame(const pb::Frame& frame) {
         SceneUpdate::Replacement r;
         r.object = t.object_id();
         for (int i = 0; i < t.fragments_size(); ++i) {
-            auto mesh = decode_mesh(t.fragments(i), "fragment " + std::to_string(i) +
-                                                        " of object " +
-                                                        std::to_string(t.object_id()));
+            auto mesh =
+                decode_mesh(t.fragments(i), "fragment " + std::to_string(i) + " of object " +
+                                                std::to_string(t.object_id()));
             if (!mesh.ok()) {
                 return mesh.status();
             }

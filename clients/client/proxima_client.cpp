@@ -92,9 +92,9 @@ StatusOr<std::unique_ptr<Client>> Client::connect(const std::string& address,
     args.SetMaxSendMessageSize(-1);
     auto channel = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
     if (!channel->WaitForConnected(deadline_after(options.connect_timeout))) {
-        return Status(StatusCode::unavailable,
-                      "cannot reach proximad at " + address + " within " +
-                          std::to_string(options.connect_timeout.count()) + " ms");
+        return Status(StatusCode::unavailable, "cannot reach proximad at " + address + " within " +
+                                                   std::to_string(options.connect_timeout.count()) +
+                                                   " ms");
     }
     auto impl = std::make_unique<Impl>();
     impl->address = address;
@@ -195,9 +195,7 @@ StatusOr<RemoteObject> Client::upload_object(const std::string& scene_id, const 
 
     // A failed write means the server has ended the call: stop sending, Finish says why.
     bool open = true;
-    auto write = [&](const pb::UploadChunk& chunk) {
-        open = open && writer->Write(chunk);
-    };
+    auto write = [&](const pb::UploadChunk& chunk) { open = open && writer->Write(chunk); };
 
     pb::UploadChunk chunk;
     auto* header = chunk.mutable_header();
@@ -213,8 +211,8 @@ StatusOr<RemoteObject> Client::upload_object(const std::string& scene_id, const 
     const std::size_t vertices_per_chunk = UPLOAD_CHUNK_BYTES / stride;
     for (std::size_t first = 0; open && first < vertices.size(); first += vertices_per_chunk) {
         const auto count = std::min(vertices_per_chunk, vertices.size() - first);
-        chunk.set_vertex_bytes(detail::pack_vertices(
-            std::span<const Vec3>(vertices).subspan(first, count), float32));
+        chunk.set_vertex_bytes(
+            detail::pack_vertices(std::span<const Vec3>(vertices).subspan(first, count), float32));
         write(chunk);
     }
     const std::size_t triangles_per_chunk = UPLOAD_CHUNK_BYTES / detail::TRIANGLE_BYTES;
@@ -333,6 +331,8 @@ Status FrameStream::finish() {
     return s.final_status;
 }
 
-void FrameStream::cancel() { m_impl->context.TryCancel(); }
+void FrameStream::cancel() {
+    m_impl->context.TryCancel();
+}
 
 }  // namespace proxima::client

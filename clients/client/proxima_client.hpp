@@ -77,7 +77,7 @@ struct FrameResponse {
 class FrameStream;
 
 class Client {
-public:
+  public:
     // Connects to HOST:PORT; fails with unavailable when the daemon does not answer in time.
     static StatusOr<std::unique_ptr<Client>> connect(const std::string& address,
                                                      ConnectOptions options = {});
@@ -85,7 +85,8 @@ public:
 
     StatusOr<RemoteServerInfo> server_info();
     // Creates a scene with these objects (large meshes are uploaded in chunks).
-    StatusOr<RemoteScene> create_scene(const std::string& name, const std::vector<NamedMesh>& objects);
+    StatusOr<RemoteScene> create_scene(const std::string& name,
+                                       const std::vector<NamedMesh>& objects);
     StatusOr<RemoteScene> describe_scene(const std::string& scene_id);
     Status delete_scene(const std::string& scene_id);
     // Adds one object through the chunked upload.
@@ -98,7 +99,7 @@ public:
 
     struct Impl;
 
-private:
+  private:
     explicit Client(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> m_impl;
 };
@@ -106,7 +107,7 @@ private:
 // A bidirectional frame stream. Lockstep use: send(), then receive(); or pipeline up to the
 // server's max_frames_in_flight sends before receiving. Not thread-safe for concurrent sends.
 class FrameStream {
-public:
+  public:
     ~FrameStream();  // cancels the stream if it was not finished
     Status send(const FrameRequest& frame);
     StatusOr<FrameResponse> receive();
@@ -118,7 +119,7 @@ public:
     struct Impl;
     explicit FrameStream(std::unique_ptr<Impl> impl);
 
-private:
+  private:
     std::unique_ptr<Impl> m_impl;
 };
 

@@ -6,7 +6,9 @@ namespace proxima::client {
 
 namespace {
 
-nlohmann::json point(const Vec3& p) { return nlohmann::json::array({p.x, p.y, p.z}); }
+nlohmann::json point(const Vec3& p) {
+    return nlohmann::json::array({p.x, p.y, p.z});
+}
 
 // JSON has no infinity: "no such feature" is null.
 nlohmann::json distance_value(double d) {
@@ -49,9 +51,8 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
     auto& list = out["objects"] = nlohmann::json::array();
     for (std::size_t i = 0; i < objects.size(); ++i) {
         const auto& obj = objects[i];
-        nlohmann::json o = {{"name", obj.mesh.name},
-                            {"file", obj.file},
-                            {"triangles", obj.file_triangle.size()}};
+        nlohmann::json o = {
+            {"name", obj.mesh.name}, {"file", obj.file}, {"triangles", obj.file_triangle.size()}};
         if (obj.component >= 0) {
             o["component"] = obj.component;
         }
@@ -63,12 +64,13 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
                                    {"point", nullptr},    {"other_point", nullptr}};
             } else {
                 const auto other = static_cast<std::size_t>(s.other);
-                o["separation"] = {{"distance", s.distance},
-                                   {"other", s.other},
-                                   {"triangle", obj.file_triangle[s.triangle]},
-                                   {"other_triangle", objects[other].file_triangle[s.other_triangle]},
-                                   {"point", point(s.point)},
-                                   {"other_point", point(s.other_point)}};
+                o["separation"] = {
+                    {"distance", s.distance},
+                    {"other", s.other},
+                    {"triangle", obj.file_triangle[s.triangle]},
+                    {"other_triangle", objects[other].file_triangle[s.other_triangle]},
+                    {"point", point(s.point)},
+                    {"other_point", point(s.other_point)}};
             }
         }
         list.push_back(std::move(o));

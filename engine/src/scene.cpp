@@ -85,9 +85,10 @@ StatusOr<SceneUpdateResult> Scene::apply(SceneUpdate update) {
             return s;
         }
         for (std::size_t f = 0; f < r.fragments.size(); ++f) {
-            const auto label = "topology change of object " + std::to_string(r.object) +
-                               ", fragment " + std::to_string(f) +
-                               (r.fragments[f].name.empty() ? "" : " ('" + r.fragments[f].name + "')");
+            const auto label =
+                "topology change of object " + std::to_string(r.object) + ", fragment " +
+                std::to_string(f) +
+                (r.fragments[f].name.empty() ? "" : " ('" + r.fragments[f].name + "')");
             if (Status s = validate_mesh(r.fragments[f].mesh, label); !s.ok()) {
                 return s;
             }
@@ -98,16 +99,16 @@ StatusOr<SceneUpdateResult> Scene::apply(SceneUpdate update) {
             return s;
         }
         const auto& obj = m_objects[static_cast<std::size_t>(index_of(p.object))];
-        if (Status s = validate_positions(p.vertices, obj.vertices.size(),
-                                          object_label(obj.name, obj.id));
+        if (Status s =
+                validate_positions(p.vertices, obj.vertices.size(), object_label(obj.name, obj.id));
             !s.ok()) {
             return s;
         }
     }
     for (std::size_t a = 0; a < update.additions.size(); ++a) {
         const auto& add = update.additions[a];
-        const auto label = "new object " + std::to_string(a) +
-                           (add.name.empty() ? "" : " ('" + add.name + "')");
+        const auto label =
+            "new object " + std::to_string(a) + (add.name.empty() ? "" : " ('" + add.name + "')");
         if (Status s = validate_mesh(add.mesh, label); !s.ok()) {
             return s;
         }

@@ -4,15 +4,24 @@ namespace proxima {
 
 const char* status_code_name(StatusCode code) {
     switch (code) {
-        case StatusCode::ok: return "OK";
-        case StatusCode::invalid_argument: return "INVALID_ARGUMENT";
-        case StatusCode::not_found: return "NOT_FOUND";
-        case StatusCode::failed_precondition: return "FAILED_PRECONDITION";
-        case StatusCode::resource_exhausted: return "RESOURCE_EXHAUSTED";
-        case StatusCode::cancelled: return "CANCELLED";
-        case StatusCode::deadline_exceeded: return "DEADLINE_EXCEEDED";
-        case StatusCode::unavailable: return "UNAVAILABLE";
-        case StatusCode::internal: return "INTERNAL";
+        case StatusCode::ok:
+            return "OK";
+        case StatusCode::invalid_argument:
+            return "INVALID_ARGUMENT";
+        case StatusCode::not_found:
+            return "NOT_FOUND";
+        case StatusCode::failed_precondition:
+            return "FAILED_PRECONDITION";
+        case StatusCode::resource_exhausted:
+            return "RESOURCE_EXHAUSTED";
+        case StatusCode::cancelled:
+            return "CANCELLED";
+        case StatusCode::deadline_exceeded:
+            return "DEADLINE_EXCEEDED";
+        case StatusCode::unavailable:
+            return "UNAVAILABLE";
+        case StatusCode::internal:
+            return "INTERNAL";
     }
     return "UNKNOWN";
 }

@@ -80,7 +80,8 @@ TriangleMesh sheet(int nx, int ny) {
         for (int i = 0; i + 1 < nx; ++i) {
             const auto a = static_cast<std::uint32_t>(j * nx + i);
             m.triangles.push_back({a, a + 1, a + static_cast<std::uint32_t>(nx) + 1});
-            m.triangles.push_back({a, a + static_cast<std::uint32_t>(nx) + 1, a + static_cast<std::uint32_t>(nx)});
+            m.triangles.push_back(
+                {a, a + static_cast<std::uint32_t>(nx) + 1, a + static_cast<std::uint32_t>(nx)});
         }
     }
     return m;
@@ -186,7 +187,8 @@ void throughput(const std::string& address, int streams, double seconds) {
                 f.update = local;
                 // The bowl scene keeps its topology: local and remote ids correspond by position.
                 for (auto& p : f.update.positions) {
-                    p.object = remote->objects[static_cast<std::size_t>(mirror.index_of(p.object))].id;
+                    p.object =
+                        remote->objects[static_cast<std::size_t>(mirror.index_of(p.object))].id;
                 }
                 (void)mirror.apply(std::move(local));
                 const auto t0 = Clock::now();
@@ -237,17 +239,20 @@ int main(int argc, char** argv) {
     Daemon daemon;
     std::printf("proximad at %s; %u hardware threads\n\n", daemon.address.c_str(),
                 std::thread::hardware_concurrency());
-    std::printf("Round trip per frame, positions only, lockstep (ms; overhead = round trip - "
-                "server time)\n\n");
-    std::printf("| vertices | buffer | round trip p50 | server p50 | overhead p50 | overhead p99 |\n");
+    std::printf(
+        "Round trip per frame, positions only, lockstep (ms; overhead = round trip - "
+        "server time)\n\n");
+    std::printf(
+        "| vertices | buffer | round trip p50 | server p50 | overhead p50 | overhead p99 |\n");
     std::printf("|---|---|---|---|---|---|\n");
     const int frames = quick ? 8 : 200;
     for (bool f32 : {true, false}) {
-        overhead(daemon.address, 150, 100, f32, frames);    // 15,000 vertices
+        overhead(daemon.address, 150, 100, f32, frames);          // 15,000 vertices
         overhead(daemon.address, 500, 300, f32, quick ? 5 : 60);  // 150,000 vertices
     }
-    std::printf("\nConcurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "
-                "frame, lockstep\n\n");
+    std::printf(
+        "\nConcurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "
+        "frame, lockstep\n\n");
     std::printf("| streams | frames/s (all streams) | latency p50 ms | latency p99 ms |\n");
     std::printf("|---|---|---|---|\n");
     for (int s : {1, 8, 32}) {

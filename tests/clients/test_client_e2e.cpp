@@ -24,7 +24,7 @@ namespace {
 
 // proximad as a child process; the address comes from its first stdout line.
 class DaemonEnvironment : public ::testing::Environment {
-public:
+  public:
     static inline std::string address;
 
     void SetUp() override {
@@ -68,7 +68,7 @@ public:
         }
     }
 
-private:
+  private:
     pid_t m_pid = -1;
     FILE* m_stdout = nullptr;
 };
@@ -97,7 +97,9 @@ QueryRequest all_queries() {
     return q;
 }
 
-std::uint64_t bits(double d) { return std::bit_cast<std::uint64_t>(d); }
+std::uint64_t bits(double d) {
+    return std::bit_cast<std::uint64_t>(d);
+}
 
 // Rounds to float and back. Through a volatile because GCC 12.2's SLP vectorizer (-O2) drops the
 // rounding of `v = {float(v.x), float(v.y), float(v.z)}` over a vector of Vec3.

@@ -25,7 +25,9 @@ Message reparse(const Message& m) {
     return out;
 }
 
-std::uint64_t bits(double d) { return std::bit_cast<std::uint64_t>(d); }
+std::uint64_t bits(double d) {
+    return std::bit_cast<std::uint64_t>(d);
+}
 
 void expect_same(const Vec3& a, const Vec3& b) {
     EXPECT_EQ(bits(a.x), bits(b.x));
@@ -328,13 +330,11 @@ TEST(ClientConvert, MalformedBuffersAreRejectedWithTheCulprit) {
     pos->set_object_id(17);
     pos->mutable_vertices()->set_type(pb::SCALAR_TYPE_FLOAT64);
     pos->mutable_vertices()->set_data(std::string(23, '\0'));
-    expect_error(detail::decode_frame(frame).status(), StatusCode::invalid_argument,
-                 {"object 17"});
+    expect_error(detail::decode_frame(frame).status(), StatusCode::invalid_argument, {"object 17"});
 
     pb::QuerySpec spec;
     spec.set_culler(static_cast<pb::Culler>(9));
-    expect_error(detail::decode_query(spec).status(), StatusCode::invalid_argument,
-                 {"culler 9"});
+    expect_error(detail::decode_query(spec).status(), StatusCode::invalid_argument, {"culler 9"});
 }
 
 TEST(ClientConvert, MalformedResultsAreInternalErrors) {

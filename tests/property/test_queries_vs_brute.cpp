@@ -241,15 +241,15 @@ TEST(QueriesVsBrute, DeformingFramesAndTopologyChange) {
             ASSERT_TRUE(bvh.scene().apply(std::move(update)).ok());
             ProximityEngine brute;
             for (const auto& o : bvh.scene().objects()) {
-                ASSERT_TRUE(brute.scene()
-                                .add_object({o.name, {o.vertices, o.topology->triangles()}})
-                                .ok());
+                ASSERT_TRUE(
+                    brute.scene().add_object({o.name, {o.vertices, o.topology->triangles()}}).ok());
             }
             auto a = bvh.query(full_request(CullerKind::bvh, 0.05));
             auto b = brute.query(full_request(CullerKind::brute, 0.05));
             ASSERT_TRUE(a.ok() && b.ok());
-            expect_equal_answers(bvh.scene(), a.value(), b.value(),
-                                 "seed " + std::to_string(seed) + " frame " + std::to_string(frame));
+            expect_equal_answers(
+                bvh.scene(), a.value(), b.value(),
+                "seed " + std::to_string(seed) + " frame " + std::to_string(frame));
             if (HasFatalFailure()) {
                 return;
             }

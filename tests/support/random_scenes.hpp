@@ -27,8 +27,8 @@ inline TriangleMesh sphere(Rng& rng, int rings, int segments, double r, double n
         for (int j = 0; j < segments; ++j) {
             const double ph = 2 * std::numbers::pi * j / segments;
             const double rr = r * (1.0 + uniform(rng, -noise, noise));
-            m.vertices.push_back(
-                {rr * std::sin(th) * std::cos(ph), rr * std::sin(th) * std::sin(ph), rr * std::cos(th)});
+            m.vertices.push_back({rr * std::sin(th) * std::cos(ph),
+                                  rr * std::sin(th) * std::sin(ph), rr * std::cos(th)});
         }
     }
     m.vertices.push_back({0, 0, -r});
@@ -62,8 +62,8 @@ inline TriangleMesh sheet(Rng& rng, int nx, int ny, double fold) {
             const double v = static_cast<double>(j) / ny;
             // Fold the sheet over itself along u: a half turn of radius `fold`.
             const double ang = std::numbers::pi * u;
-            m.vertices.push_back({fold * std::sin(ang) + 0.02 * std::sin(a * 7 * v),
-                                  v, fold * (1 - std::cos(ang)) + 0.02 * std::cos(b * 5 * u)});
+            m.vertices.push_back({fold * std::sin(ang) + 0.02 * std::sin(a * 7 * v), v,
+                                  fold * (1 - std::cos(ang)) + 0.02 * std::cos(b * 5 * u)});
         }
     }
     auto id = [&](int i, int j) { return static_cast<std::uint32_t>(j * (nx + 1) + i); };

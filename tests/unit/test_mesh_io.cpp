@@ -100,7 +100,7 @@ void expect_sample_mesh(const StatusOr<TriangleMesh>& read) {
 
 // Writes scalars in a chosen byte order.
 class BinaryWriter {
-public:
+  public:
     explicit BinaryWriter(bool big_endian) : m_big_endian(big_endian) {}
 
     template <class T>
@@ -114,7 +114,7 @@ public:
 
     const std::string& bytes() const { return m_bytes; }
 
-private:
+  private:
     bool m_big_endian;
     std::string m_bytes;
 };

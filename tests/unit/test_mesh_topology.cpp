@@ -44,7 +44,8 @@ TEST(MeshTopology, OneRingMatchesDefinition) {
             const auto ring = topo.one_ring(t);
             EXPECT_EQ(std::vector<std::uint32_t>(ring.begin(), ring.end()), brute_ring(m, t));
             for (std::uint32_t u = 0; u < m.triangles.size(); ++u) {
-                EXPECT_EQ(topo.adjacent(t, u), u == t || share_vertex(m.triangles[t], m.triangles[u]));
+                EXPECT_EQ(topo.adjacent(t, u),
+                          u == t || share_vertex(m.triangles[t], m.triangles[u]));
             }
         }
     }
@@ -124,7 +125,8 @@ TEST(MeshValidation, NamesObjectAndProblem) {
     EXPECT_FALSE(validate_mesh(m, "x").ok());
 
     EXPECT_FALSE(validate_mesh(TriangleMesh{}, "empty").ok());
-    EXPECT_NE(validate_mesh(TriangleMesh{}, "empty").message().find("no triangles"), std::string::npos);
+    EXPECT_NE(validate_mesh(TriangleMesh{}, "empty").message().find("no triangles"),
+              std::string::npos);
 }
 
 }  // namespace

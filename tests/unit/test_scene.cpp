@@ -43,7 +43,8 @@ TEST(Scene, UpdateIsAllOrNothing) {
     twice.removals.push_back(a);
     EXPECT_EQ(scene.apply(twice).status().code(), StatusCode::invalid_argument);
     SceneUpdate bad_fragment;
-    bad_fragment.replacements.push_back({a, {unit_box("ok", 5), {"bad", {{{0, 0, 0}}, {{0, 0, 3}}}}}});
+    bad_fragment.replacements.push_back(
+        {a, {unit_box("ok", 5), {"bad", {{{0, 0, 0}}, {{0, 0, 3}}}}}});
     auto rb = scene.apply(bad_fragment);
     EXPECT_EQ(rb.status().code(), StatusCode::invalid_argument);
     EXPECT_NE(rb.status().message().find("fragment 1"), std::string::npos);
@@ -99,7 +100,8 @@ TEST(SweepAndPrune, WithinMatchesAllPairsAndStaysCoherent) {
             double closest = std::numeric_limits<double>::infinity();
             for (std::size_t j = 0; j < scene.size(); ++j) {
                 if (j != i) {
-                    closest = std::min(closest, std::sqrt(box_squared_distance(scene[i].box, scene[j].box)));
+                    closest = std::min(closest,
+                                       std::sqrt(box_squared_distance(scene[i].box, scene[j].box)));
                 }
             }
             EXPECT_GE(sap.separation_upper_bound(scene, i), closest);

@@ -57,7 +57,7 @@ struct SceneUpdateResult {
 };
 
 class Scene {
-public:
+  public:
     // Validates and adds one object at the end.
     StatusOr<ObjectId> add_object(NamedMesh mesh);
     // All-or-nothing: if any part is invalid (unknown id, an id named twice, wrong vertex count,
@@ -73,7 +73,7 @@ public:
     // Incremented by every successful change: cullers use it to skip redundant refits.
     std::uint64_t generation() const { return m_generation; }
 
-private:
+  private:
     SceneObject make_object(NamedMesh mesh);
     void reindex();
 

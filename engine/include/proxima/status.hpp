@@ -26,7 +26,7 @@ enum class StatusCode {
 const char* status_code_name(StatusCode code);
 
 class [[nodiscard]] Status {
-public:
+  public:
     Status() = default;
     Status(StatusCode code, std::string message) : m_code(code), m_message(std::move(message)) {}
 
@@ -37,21 +37,25 @@ public:
     // "INVALID_ARGUMENT: object 'a.ply': triangle 12 index 40 out of range (40 vertices)".
     std::string to_string() const;
 
-private:
+  private:
     StatusCode m_code = StatusCode::ok;
     std::string m_message;
 };
 
-inline Status invalid_argument(std::string m) { return {StatusCode::invalid_argument, std::move(m)}; }
-inline Status not_found(std::string m) { return {StatusCode::not_found, std::move(m)}; }
+inline Status invalid_argument(std::string m) {
+    return {StatusCode::invalid_argument, std::move(m)};
+}
+inline Status not_found(std::string m) {
+    return {StatusCode::not_found, std::move(m)};
+}
 inline Status failed_precondition(std::string m) {
     return {StatusCode::failed_precondition, std::move(m)};
 }
 
 template <class T>
 class [[nodiscard]] StatusOr {
-public:
-    StatusOr(T value) : m_value(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  public:
+    StatusOr(T value) : m_value(std::move(value)) {}          // NOLINT(google-explicit-constructor)
     StatusOr(Status status) : m_status(std::move(status)) {}  // NOLINT(google-explicit-constructor)
 
     bool ok() const { return m_status.ok(); }
@@ -62,7 +66,7 @@ public:
     T* operator->() { return &*m_value; }
     const T* operator->() const { return &*m_value; }
 
-private:
+  private:
     Status m_status;
     std::optional<T> m_value;
 };

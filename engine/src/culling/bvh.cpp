@@ -44,10 +44,9 @@ struct Builder {
         const Vec3 ext = cbox.extent();
         const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
         const auto mid = begin + count / 2;
-        std::nth_element(order.begin() + begin, order.begin() + mid, order.begin() + end,
-                         [&](std::uint32_t a, std::uint32_t b) {
-                             return centers[a][axis] < centers[b][axis];
-                         });
+        std::nth_element(
+            order.begin() + begin, order.begin() + mid, order.begin() + end,
+            [&](std::uint32_t a, std::uint32_t b) { return centers[a][axis] < centers[b][axis]; });
         build(begin, mid);  // left child is index + 1
         const auto right = build(mid, end);
         nodes[index].first = right;

@@ -16,7 +16,9 @@ namespace {
 // A node pair is culled when its box distance reaches `threshold_sq`, the current best widened by
 // the rounding slack (cull_threshold_sq): rounding can then never drop a pair whose computed
 // distance is the answer, nor one tied with it.
-bool culled(double box_sq, double threshold_sq) { return box_sq >= threshold_sq; }
+bool culled(double box_sq, double threshold_sq) {
+    return box_sq >= threshold_sq;
+}
 
 double pair_slack(const Scene& scene, std::size_t a, std::size_t b) {
     return rounding_slack(std::max(coordinate_scale(scene[a].box), coordinate_scale(scene[b].box)));
@@ -37,7 +39,9 @@ struct Threshold {
     }
 };
 
-double center_gap(const Aabb& a, const Aabb& b) { return squared_norm(a.center() - b.center()); }
+double center_gap(const Aabb& a, const Aabb& b) {
+    return squared_norm(a.center() - b.center());
+}
 
 double node_size(const Bvh::Node& n) {
     const Vec3 e = n.box.extent();
@@ -79,8 +83,8 @@ void BvhCuller::prepare(const Scene& scene) {
     m_generation = scene.generation();
 }
 
-void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b,
-                                double& bound_sq, PairVisitor visit) const {
+void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
+                                PairVisitor visit) const {
     const Bvh& ba = m_entries[a].bvh;
     const Bvh& bb = m_entries[b].bvh;
     const auto& na = ba.nodes();
@@ -295,13 +299,15 @@ struct RadiusTraversal {
                 std::swap(ta, tb);
             }
         }
-        if (box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]) <= threshold_sq) {
+        if (box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]) <=
+            threshold_sq) {
             out.emplace_back(ta, tb);
         }
     }
 
     // Expands node pair (i, j) one level; leaf pairs are emitted, child pairs pushed to `next`.
-    void step(std::uint32_t i, std::uint32_t j, std::vector<std::pair<std::uint32_t, std::uint32_t>>& next,
+    void step(std::uint32_t i, std::uint32_t j,
+              std::vector<std::pair<std::uint32_t, std::uint32_t>>& next,
               std::vector<TrianglePair>& out) const {
         const auto& x = ba.nodes()[i];
         const auto& y = bb.nodes()[j];

@@ -6,9 +6,12 @@ namespace proxima {
 
 const char* culler_name(CullerKind kind) {
     switch (kind) {
-        case CullerKind::automatic: return "auto";
-        case CullerKind::brute: return "brute";
-        case CullerKind::bvh: return "bvh";
+        case CullerKind::automatic:
+            return "auto";
+        case CullerKind::brute:
+            return "brute";
+        case CullerKind::bvh:
+            return "bvh";
     }
     return "unknown";
 }

@@ -9,7 +9,7 @@
 namespace proxima::detail {
 
 class BruteCuller final : public Culler {
-public:
+  public:
     CullerKind kind() const override { return CullerKind::brute; }
     bool object_culling() const override { return false; }
     void prepare(const Scene&) override {}
@@ -22,7 +22,7 @@ public:
 };
 
 class BvhCuller final : public Culler {
-public:
+  public:
     CullerKind kind() const override { return CullerKind::bvh; }
     bool object_culling() const override { return true; }
     void prepare(const Scene& scene) override;
@@ -39,7 +39,7 @@ public:
         Bvh bvh;
     };
 
-private:
+  private:
     // One entry per scene object, in scene order, valid for m_generation.
     std::vector<Entry> m_entries;
     const Scene* m_scene = nullptr;

@@ -48,8 +48,10 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack) {
         return 0.0;
     }
     // Projections relative to a's centroid keep the magnitudes (and so the rounding) small.
-    const double a_max = std::max({dot(axis, a[0] - ca), dot(axis, a[1] - ca), dot(axis, a[2] - ca)});
-    const double b_min = std::min({dot(axis, b[0] - ca), dot(axis, b[1] - ca), dot(axis, b[2] - ca)});
+    const double a_max =
+        std::max({dot(axis, a[0] - ca), dot(axis, a[1] - ca), dot(axis, a[2] - ca)});
+    const double b_min =
+        std::min({dot(axis, b[0] - ca), dot(axis, b[1] - ca), dot(axis, b[2] - ca)});
     const double gap = (b_min - a_max) / len;
     if (!(gap > 0.0)) {
         return 0.0;

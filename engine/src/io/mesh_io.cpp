@@ -8,9 +8,9 @@
 #include <system_error>
 #include <tuple>
 
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/Importer.hpp>
 
 #include "io/ply_off.hpp"
 
@@ -18,8 +18,8 @@ namespace proxima {
 
 namespace {
 
-void collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent,
-             TriangleMesh& out, std::size_t& skipped) {
+void collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent, TriangleMesh& out,
+             std::size_t& skipped) {
     const aiMatrix4x4 transform = parent * node->mTransformation;
     const bool identity = transform.IsIdentity();
     for (unsigned m = 0; m < node->mNumMeshes; ++m) {

@@ -129,7 +129,7 @@ void append_fan(const std::vector<std::uint32_t>& polygon, std::vector<TriangleI
 
 // Whitespace-separated tokens over text, optionally with '#' comments to the end of the line.
 class TextCursor {
-public:
+  public:
     TextCursor(std::string_view data, std::size_t pos, bool hash_comments)
         : m_data(data), m_pos(pos), m_hash_comments(hash_comments) {}
 
@@ -172,7 +172,7 @@ public:
 
     std::size_t remaining() const { return m_data.size() - m_pos; }
 
-private:
+  private:
     void skip_blank(bool across_lines) {
         while (m_pos < m_data.size()) {
             const char c = m_data[m_pos];
@@ -473,7 +473,7 @@ enum class Use : std::uint8_t { skip, x, y, z, corners };
 enum class ReadResult { ok, end, bad };
 
 class BinarySource {
-public:
+  public:
     BinarySource(std::string_view body, bool swap)
         : m_pos(reinterpret_cast<const unsigned char*>(body.data())),
           m_end(m_pos + body.size()),
@@ -500,14 +500,14 @@ public:
 
     std::string bad_value() const { return {}; }
 
-private:
+  private:
     const unsigned char* m_pos;
     const unsigned char* m_end;
     bool m_swap;
 };
 
 class TextSource {
-public:
+  public:
     TextSource(std::string_view data, std::size_t pos) : m_in(data, pos, false) {}
 
     ReadResult scalar(ScalarType /*type*/, double& out) {
@@ -537,7 +537,7 @@ public:
                printable(m_bad) + "'";
     }
 
-private:
+  private:
     TextCursor m_in;
     std::string_view m_bad;
 };

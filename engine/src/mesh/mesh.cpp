@@ -22,11 +22,10 @@ Status validate_mesh(const TriangleMesh& mesh, const std::string& what) {
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
         for (int k = 0; k < 3; ++k) {
             if (mesh.triangles[t][k] >= n) {
-                return invalid_argument(what + ": triangle " + std::to_string(t) + " corner " +
-                                        std::to_string(k) + " has vertex index " +
-                                        std::to_string(mesh.triangles[t][k]) +
-                                        ", out of range (the mesh has " + std::to_string(n) +
-                                        " vertices)");
+                return invalid_argument(
+                    what + ": triangle " + std::to_string(t) + " corner " + std::to_string(k) +
+                    " has vertex index " + std::to_string(mesh.triangles[t][k]) +
+                    ", out of range (the mesh has " + std::to_string(n) + " vertices)");
             }
         }
     }

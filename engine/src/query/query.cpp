@@ -64,8 +64,8 @@ double scene_scale(const Scene& scene) {
 
 // A found closest pair, ordered so that ties in distance resolve the same way on every run and
 // with any thread count: smaller distance, then smaller other object, then smaller triangles.
-bool better(double d_sq, std::int64_t other, std::uint32_t t, std::uint32_t u,
-            double best_sq, const Separation& best) {
+bool better(double d_sq, std::int64_t other, std::uint32_t t, std::uint32_t u, double best_sq,
+            const Separation& best) {
     if (d_sq != best_sq) {
         return d_sq < best_sq;
     }
@@ -163,8 +163,8 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
 // Pairs tied with an object's best are still searched (thresholds are widened, the search bound
 // is the next double up), so the tie-break in `better` sees every tied pair and the answer does
 // not depend on scheduling.
-void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrune& sap,
-                    Work& work, QueryResult& result) {
+void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrune& sap, Work& work,
+                    QueryResult& result) {
     const std::size_t n = scene.size();
     result.separation.assign(n, Separation{});
     if (!culler.object_culling()) {
@@ -233,9 +233,9 @@ void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrun
                 continue;
             }
             ++searched;
-            const auto r = search_pair(scene, culler, i, j,
-                                       std::nextafter(bound, std::numeric_limits<double>::infinity()),
-                                       slack);
+            const auto r =
+                search_pair(scene, culler, i, j,
+                            std::nextafter(bound, std::numeric_limits<double>::infinity()), slack);
             tests += r.exact_tests;
             if (r.found) {
                 offer(i, j, r.triangle, r.other_triangle, r.squared_distance, r.point,
@@ -259,9 +259,11 @@ void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrun
 // best pair is updated under a striped lock with a deterministic tie-break (smaller distance,
 // then smaller triangle index), so the answer does not depend on scheduling.
 class SelfBests {
-public:
+  public:
     explicit SelfBests(std::vector<SelfDistance>& out)
-        : m_out(out), m_bound(out.size()), m_exact(out.size(), std::numeric_limits<double>::infinity()) {
+        : m_out(out),
+          m_bound(out.size()),
+          m_exact(out.size(), std::numeric_limits<double>::infinity()) {
         for (auto& b : m_bound) {
             b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
         }
@@ -274,7 +276,8 @@ public:
         }
         std::lock_guard<std::mutex> lock(m_locks[t % m_locks.size()]);
         SelfDistance& best = m_out[t];
-        if (d_sq < m_exact[t] || (d_sq == m_exact[t] && static_cast<std::int64_t>(u) < best.closest)) {
+        if (d_sq < m_exact[t] ||
+            (d_sq == m_exact[t] && static_cast<std::int64_t>(u) < best.closest)) {
             m_exact[t] = d_sq;
             best.closest = u;
             best.point = p;
@@ -291,7 +294,7 @@ public:
         }
     }
 
-private:
+  private:
     std::vector<SelfDistance>& m_out;
     std::vector<std::atomic<double>> m_bound;
     std::vector<double> m_exact;
@@ -341,38 +344,40 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
         };
 
         if (cull) {
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
-                if (work.should_stop()) {
-                    return;
-                }
-                std::uint64_t count = 0;
-                for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                    // Seed §5.2.2, reduced to its best candidate: the 2-ring triangle with the
-                    // nearest centroid is almost always the closest or near it, so one exact test
-                    // gives each triangle a tight bound; the traversal below finds the rest.
-                    // (Measured: testing the whole 2-ring took 2-3x the exact tests.)
-                    const Triangle x = corners(obj, t);
-                    const Vec3 ct = (x[0] + x[1] + x[2]) / 3.0;
-                    double nearest = std::numeric_limits<double>::infinity();
-                    std::int64_t seed = -1;
-                    for (auto u : topo.cached_two_ring(t)) {
-                        if (u > t) {
-                            const auto& iu = obj.triangle(u);
-                            const Vec3 cu = (obj.vertices[iu[0]] + obj.vertices[iu[1]] +
-                                             obj.vertices[iu[2]]) / 3.0;
-                            const double d = squared_norm(cu - ct);
-                            if (d < nearest) {
-                                nearest = d;
-                                seed = u;
+            tbb::parallel_for(
+                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
+                    if (work.should_stop()) {
+                        return;
+                    }
+                    std::uint64_t count = 0;
+                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                        // Seed §5.2.2, reduced to its best candidate: the 2-ring triangle with the
+                        // nearest centroid is almost always the closest or near it, so one exact
+                        // test gives each triangle a tight bound; the traversal below finds the
+                        // rest. (Measured: testing the whole 2-ring took 2-3x the exact tests.)
+                        const Triangle x = corners(obj, t);
+                        const Vec3 ct = (x[0] + x[1] + x[2]) / 3.0;
+                        double nearest = std::numeric_limits<double>::infinity();
+                        std::int64_t seed = -1;
+                        for (auto u : topo.cached_two_ring(t)) {
+                            if (u > t) {
+                                const auto& iu = obj.triangle(u);
+                                const Vec3 cu = (obj.vertices[iu[0]] + obj.vertices[iu[1]] +
+                                                 obj.vertices[iu[2]]) /
+                                                3.0;
+                                const double d = squared_norm(cu - ct);
+                                if (d < nearest) {
+                                    nearest = d;
+                                    seed = u;
+                                }
                             }
                         }
+                        if (seed >= 0) {
+                            test(t, static_cast<std::uint32_t>(seed), x, count);
+                        }
                     }
-                    if (seed >= 0) {
-                        test(t, static_cast<std::uint32_t>(seed), x, count);
-                    }
-                }
-                tests += count;
-            });
+                    tests += count;
+                });
         }
         if (work.should_stop()) {
             return;
@@ -442,8 +447,8 @@ void run_pairs(const Scene& scene, const Culler& culler, const SweepAndPrune& sa
             auto& out = candidates[k];
             out.reserve(cands.size());
             for (auto [ta, tb] : cands) {
-                out.push_back({static_cast<std::uint32_t>(i), ta, static_cast<std::uint32_t>(j),
-                               tb, 0.0});
+                out.push_back(
+                    {static_cast<std::uint32_t>(i), ta, static_cast<std::uint32_t>(j), tb, 0.0});
             }
         }
         const SceneObject& a = scene[i];
@@ -592,8 +597,8 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
             cands.clear();
             culler.pairs_within(m_scene, i, j, 0.0, cands);
             for (auto [ta, tb] : cands) {
-                result.pns.push_back({static_cast<std::uint32_t>(i), ta,
-                                      static_cast<std::uint32_t>(j), tb, 0.0});
+                result.pns.push_back(
+                    {static_cast<std::uint32_t>(i), ta, static_cast<std::uint32_t>(j), tb, 0.0});
             }
         }
         std::sort(result.pns.begin(), result.pns.end());

@@ -13,7 +13,7 @@
 namespace proxima {
 
 class Bvh {
-public:
+  public:
     // Nodes are stored in depth-first pre-order: a node's left child is the next node and its
     // right child is `right`; children always have larger indices than their parent, so a reverse
     // sweep refits bottom-up. A leaf (count > 0) holds triangles order()[first, first + count).
@@ -34,7 +34,7 @@ public:
     // Box of each triangle (by triangle index) at the last build/refit.
     const std::vector<Aabb>& triangle_boxes() const { return m_tri_boxes; }
 
-private:
+  private:
     void compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology);
     std::vector<Node> m_nodes;
     std::vector<std::uint32_t> m_order;

@@ -27,17 +27,17 @@ template <class Fn>
 class FunctionRef;
 template <class R, class... Args>
 class FunctionRef<R(Args...)> {
-public:
+  public:
     template <class F>
-        requires(!std::is_same_v<std::remove_cvref_t<F>, FunctionRef>)
-    FunctionRef(F&& f)  // NOLINT(google-explicit-constructor)
+    requires(!std::is_same_v<std::remove_cvref_t<F>, FunctionRef>)
+        FunctionRef(F&& f)  // NOLINT(google-explicit-constructor)
         : m_object(const_cast<void*>(static_cast<const void*>(&f))),
           m_call([](void* o, Args... args) -> R {
               return (*static_cast<std::remove_reference_t<F>*>(o))(std::forward<Args>(args)...);
           }) {}
     R operator()(Args... args) const { return m_call(m_object, std::forward<Args>(args)...); }
 
-private:
+  private:
     void* m_object;
     R (*m_call)(void*, Args...);
 };
@@ -50,7 +50,7 @@ using TrianglePair = std::pair<std::uint32_t, std::uint32_t>;
 using BoundLookup = FunctionRef<double(std::uint32_t)>;
 
 class Culler {
-public:
+  public:
     virtual ~Culler() = default;
     virtual CullerKind kind() const = 0;
     // True when object-level Stage I culling (boxes, sweep and prune) may be used with this
@@ -63,8 +63,8 @@ public:
 
     // Calls visit(ta, tb) for every triangle pair (ta of object a, tb of object b, a != b) that
     // may be closer than sqrt(bound_sq). The visitor may lower bound_sq.
-    virtual void nearest_between(const Scene& scene, std::size_t a, std::size_t b,
-                                 double& bound_sq, PairVisitor visit) const = 0;
+    virtual void nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
+                                 PairVisitor visit) const = 0;
 
     // Calls visit(t, u), t < u, for every pair of object a's triangles that share no vertex and
     // may be closer than the larger of their two current bounds (`bound_sq(t)`, which the visitor

@@ -12,7 +12,7 @@
 namespace proxima {
 
 class SweepAndPrune {
-public:
+  public:
     // Re-sorts after the scene changed. Keeps the previous order for surviving objects.
     void update(const Scene& scene);
 
@@ -29,13 +29,13 @@ public:
     // Number of element moves the last update's insertion sort made (coherence statistic).
     std::uint64_t last_swaps() const { return m_swaps; }
 
-private:
-    std::vector<ObjectId> m_ids;         // sorted order of the previous frame, by id
-    std::vector<std::size_t> m_order;    // scene indices sorted by box.lo.x
-    std::vector<std::size_t> m_rank;     // scene index -> position in m_order
-    std::vector<double> m_lo;            // box.lo.x in m_order order
-    double m_max_extent = 0.0;           // largest box extent along x
-    double m_scale = 0.0;                // largest coordinate magnitude (for rounding slack)
+  private:
+    std::vector<ObjectId> m_ids;       // sorted order of the previous frame, by id
+    std::vector<std::size_t> m_order;  // scene indices sorted by box.lo.x
+    std::vector<std::size_t> m_rank;   // scene index -> position in m_order
+    std::vector<double> m_lo;          // box.lo.x in m_order order
+    double m_max_extent = 0.0;         // largest box extent along x
+    double m_scale = 0.0;              // largest coordinate magnitude (for rounding slack)
     std::uint64_t m_swaps = 0;
 };
 

@@ -10,7 +10,9 @@ namespace proxima {
 
 // Slack, in scene units, for comparisons between a bound and computed distances of primitives
 // whose coordinates are at most `scale` in magnitude: covers the absolute rounding error of both.
-inline double rounding_slack(double scale) { return 1e-12 * scale; }
+inline double rounding_slack(double scale) {
+    return 1e-12 * scale;
+}
 
 // The effective squared bound a lower bound must reach before a pair may be skipped: the current
 // best distance widened by a relative factor and the absolute slack.

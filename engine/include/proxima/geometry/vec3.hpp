@@ -21,21 +21,45 @@ struct Vec3 {
     friend constexpr bool operator==(const Vec3&, const Vec3&) = default;
 };
 
-constexpr Vec3 operator+(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-constexpr Vec3 operator-(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-constexpr Vec3 operator-(const Vec3& a) { return {-a.x, -a.y, -a.z}; }
-constexpr Vec3 operator*(double s, const Vec3& a) { return {s * a.x, s * a.y, s * a.z}; }
-constexpr Vec3 operator*(const Vec3& a, double s) { return {s * a.x, s * a.y, s * a.z}; }
-constexpr Vec3 operator/(const Vec3& a, double s) { return {a.x / s, a.y / s, a.z / s}; }
-constexpr Vec3& operator+=(Vec3& a, const Vec3& b) { a = a + b; return a; }
-constexpr Vec3& operator-=(Vec3& a, const Vec3& b) { a = a - b; return a; }
+constexpr Vec3 operator+(const Vec3& a, const Vec3& b) {
+    return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+constexpr Vec3 operator-(const Vec3& a, const Vec3& b) {
+    return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+constexpr Vec3 operator-(const Vec3& a) {
+    return {-a.x, -a.y, -a.z};
+}
+constexpr Vec3 operator*(double s, const Vec3& a) {
+    return {s * a.x, s * a.y, s * a.z};
+}
+constexpr Vec3 operator*(const Vec3& a, double s) {
+    return {s * a.x, s * a.y, s * a.z};
+}
+constexpr Vec3 operator/(const Vec3& a, double s) {
+    return {a.x / s, a.y / s, a.z / s};
+}
+constexpr Vec3& operator+=(Vec3& a, const Vec3& b) {
+    a = a + b;
+    return a;
+}
+constexpr Vec3& operator-=(Vec3& a, const Vec3& b) {
+    a = a - b;
+    return a;
+}
 
-constexpr double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr double dot(const Vec3& a, const Vec3& b) {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 constexpr Vec3 cross(const Vec3& a, const Vec3& b) {
     return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-constexpr double squared_norm(const Vec3& a) { return dot(a, a); }
-inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+constexpr double squared_norm(const Vec3& a) {
+    return dot(a, a);
+}
+inline double norm(const Vec3& a) {
+    return std::sqrt(dot(a, a));
+}
 constexpr Vec3 cwise_min(const Vec3& a, const Vec3& b) {
     return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
 }

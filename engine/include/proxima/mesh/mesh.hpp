@@ -43,7 +43,7 @@ inline bool share_vertex(const TriangleIndices& a, const TriangleIndices& b) {
 // (the other triangles sharing a vertex with it: seed 000 §5.2.2) and on-demand 2-ring, and
 // connected components (through shared vertex indices). Immutable once built.
 class MeshTopology {
-public:
+  public:
     MeshTopology(std::vector<TriangleIndices> triangles, std::size_t vertex_count);
 
     std::size_t triangle_count() const { return m_triangles.size(); }
@@ -55,7 +55,8 @@ public:
     std::span<const std::uint32_t> vertex_triangles(std::uint32_t v) const;
     // Triangles sharing at least one vertex with t, t excluded, ascending.
     std::span<const std::uint32_t> one_ring(std::uint32_t t) const;
-    // Triangles sharing a vertex with a triangle of the 1-ring, excluding t and its 1-ring, ascending.
+    // Triangles sharing a vertex with a triangle of the 1-ring, excluding t and its 1-ring,
+    // ascending.
     std::vector<std::uint32_t> two_ring(std::uint32_t t) const;
     // Same, into a caller-owned buffer (cleared first): no allocation once it has grown.
     void two_ring(std::uint32_t t, std::vector<std::uint32_t>& out) const;
@@ -73,7 +74,7 @@ public:
     std::size_t component_count() const { return m_component_count; }
     std::uint32_t component_of(std::uint32_t t) const { return m_triangle_component[t]; }
 
-private:
+  private:
     std::vector<TriangleIndices> m_triangles;
     std::size_t m_vertex_count;
     std::vector<std::uint32_t> m_vertex_offsets;  // CSR over vertices

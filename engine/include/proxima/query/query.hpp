@@ -26,16 +26,14 @@ namespace proxima {
 // Lets a caller stop long work: cancellation or a deadline. Checked between work items, so a
 // query stops within one object or one chunk of triangles.
 class CancelToken {
-public:
+  public:
     void cancel() { m_cancelled.store(true, std::memory_order_relaxed); }
     void set_deadline(std::chrono::steady_clock::time_point t) { m_deadline = t; }
     bool cancelled() const { return m_cancelled.load(std::memory_order_relaxed); }
-    bool expired() const {
-        return m_deadline && std::chrono::steady_clock::now() >= *m_deadline;
-    }
+    bool expired() const { return m_deadline && std::chrono::steady_clock::now() >= *m_deadline; }
     bool should_stop() const { return cancelled() || expired(); }
 
-private:
+  private:
     std::atomic<bool> m_cancelled{false};
     std::optional<std::chrono::steady_clock::time_point> m_deadline;
 };
@@ -52,7 +50,7 @@ struct QueryRequest {
 inline constexpr std::int64_t NO_OBJECT = -1;
 
 struct Separation {
-    std::int64_t other = NO_OBJECT;  // scene index of the closest other object
+    std::int64_t other = NO_OBJECT;    // scene index of the closest other object
     std::uint32_t triangle = 0;        // in this object
     std::uint32_t other_triangle = 0;  // in `other`
     double distance = std::numeric_limits<double>::infinity();
@@ -99,18 +97,18 @@ struct QueryStats {
 };
 
 struct QueryResult {
-    std::vector<Separation> separation;        // per object, when requested
+    std::vector<Separation> separation;           // per object, when requested
     std::vector<std::vector<SelfDistance>> self;  // per object, per triangle, when requested
-    std::vector<FeaturePair> collisions;       // sorted
-    std::vector<FeaturePair> tolerance;        // sorted, with distances
-    std::vector<FeaturePair> pns;              // sorted
+    std::vector<FeaturePair> collisions;          // sorted
+    std::vector<FeaturePair> tolerance;           // sorted, with distances
+    std::vector<FeaturePair> pns;                 // sorted
     QueryStats stats;
 };
 
 // Owns a scene and the culling state that persists between frames (refitted hierarchies, the
 // sorted intervals of Stage I), so a simulator's frames reuse work.
 class ProximityEngine {
-public:
+  public:
     ProximityEngine();
     ~ProximityEngine();
     ProximityEngine(const ProximityEngine&) = delete;
@@ -124,7 +122,7 @@ public:
     // so (partial results are discarded).
     StatusOr<QueryResult> query(const QueryRequest& request, const CancelToken* cancel = nullptr);
 
-private:
+  private:
     Culler& culler_for(CullerKind kind);
 
     Scene m_scene;

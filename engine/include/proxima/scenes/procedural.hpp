@@ -26,7 +26,8 @@ struct ProceduralScene {
 
 // ~12K triangles: a skirt-like cylindrical cloth swaying and folding around a body (seed: skirt).
 ProceduralScene skirt(std::size_t frames = 16);
-// ~15K triangles: a cloth sheet falling onto and draping over a rotating ball (seed: cloth on ball).
+// ~15K triangles: a cloth sheet falling onto and draping over a rotating ball (seed: cloth on
+// ball).
 ProceduralScene cloth_ball(std::size_t frames = 16);
 // ~4.5K triangles: ten deforming objects settling in a bowl (seed: bowl, 'siggraph 06' letters).
 ProceduralScene bowl(std::size_t frames = 16);
