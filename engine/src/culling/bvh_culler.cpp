@@ -155,91 +155,89 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
 
 namespace {
 
-// Dual traversal of one hierarchy against itself for the intra-object nearest search. Each
-// unordered node pair is visited once: (X, X) expands to (L, L), (R, R) and (L, R). A node pair is
-// culled when its box distance reaches the larger of the two nodes' thresholds, where a node's
-// threshold comes from the largest bound in its subtree (computed once at the start; bounds only
-// shrink, so it stays valid).
-struct SelfTraversal {
-    const Bvh& bvh;
-    const std::vector<TriangleIndices>& tris;
-    const std::vector<double>& node_threshold;
-    BoundLookup bound_sq;
-    PairVisitor visit;
-    double slack;
+using NodePair = std::pair<std::uint32_t, std::uint32_t>;
 
-    using NodePair = std::pair<std::uint32_t, std::uint32_t>;
-
-    double threshold_of(std::uint32_t t) const { return cull_threshold_sq(bound_sq(t), slack); }
-
-    void push_if_near(std::uint32_t i, std::uint32_t j, std::vector<NodePair>& next) const {
-        const auto& nodes = bvh.nodes();
-        if (box_squared_distance(nodes[i].box, nodes[j].box) <
-            std::max(node_threshold[i], node_threshold[j])) {
-            next.emplace_back(i, j);
+// One step of a dual traversal of hierarchies `a` and `b` (`same`: one object against itself).
+// A leaf pair goes to `leaves(x, y, same_node)`; child pairs that `near(i, j)` accepts are pushed
+// on `next`. Within one hierarchy (X, X) expands to (L, L), (R, R) and (L, R), so each unordered
+// node pair is visited once; otherwise the larger node is split.
+template <class Leaves, class Near>
+void dual_step(const Bvh& a, const Bvh& b, bool same, NodePair pair, std::vector<NodePair>& next,
+               Leaves&& leaves, Near&& near) {
+    const auto [i, j] = pair;
+    const auto& x = a.nodes()[i];
+    const auto& y = b.nodes()[j];
+    auto push = [&](std::uint32_t p, std::uint32_t q) {
+        if (near(p, q)) {
+            next.emplace_back(p, q);
         }
-    }
-
-    void leaf_pairs(const Bvh::Node& x, const Bvh::Node& y, bool same) const {
-        const auto& boxes = bvh.triangle_boxes();
-        const auto& order = bvh.order();
-        double ty[Bvh::LEAF_SIZE];
-        for (std::uint32_t q = 0; q < y.count; ++q) {
-            ty[q] = threshold_of(order[y.first + q]);
-        }
-        for (std::uint32_t p = 0; p < x.count; ++p) {
-            const auto t = order[x.first + p];
-            const double tt = same ? ty[p] : threshold_of(t);
-            for (std::uint32_t q = same ? p + 1 : 0; q < y.count; ++q) {
-                const auto u = order[y.first + q];
-                if (share_vertex(tris[t], tris[u])) {
-                    continue;
-                }
-                if (box_squared_distance(boxes[t], boxes[u]) < std::max(tt, ty[q])) {
-                    if (t < u) {
-                        visit(t, u);
-                    } else {
-                        visit(u, t);
-                    }
-                }
-            }
-        }
-    }
-
-    void step(std::uint32_t i, std::uint32_t j, std::vector<NodePair>& next) const {
-        const auto& nodes = bvh.nodes();
-        const auto& x = nodes[i];
-        const auto& y = nodes[j];
-        if (i == j) {
-            if (x.leaf()) {
-                leaf_pairs(x, x, true);
-                return;
-            }
-            next.emplace_back(i + 1, i + 1);
-            next.emplace_back(x.first, x.first);
-            push_if_near(i + 1, x.first, next);
+    };
+    if (same && i == j) {
+        if (x.leaf()) {
+            leaves(x, x, true);
             return;
         }
-        if (x.leaf() && y.leaf()) {
-            leaf_pairs(x, y, false);
-            return;
-        }
-        if (!x.leaf() && (y.leaf() || node_size(x) >= node_size(y))) {
-            push_if_near(i + 1, j, next);
-            push_if_near(x.first, j, next);
-        } else {
-            push_if_near(i, j + 1, next);
-            push_if_near(i, y.first, next);
-        }
+        next.emplace_back(i + 1, i + 1);
+        next.emplace_back(x.first, x.first);
+        push(i + 1, x.first);
+        return;
     }
-};
+    if (x.leaf() && y.leaf()) {
+        leaves(x, y, false);
+        return;
+    }
+    if (!x.leaf() && (y.leaf() || node_size(x) >= node_size(y))) {
+        push(i + 1, j);
+        push(x.first, j);
+    } else {
+        push(i, j + 1);
+        push(i, y.first);
+    }
+}
+
+// Runs `step(pair, next, slot)` from the root pair: breadth-first (slot 0) until `fan_out` node
+// pairs are pending, then each pending pair depth-first in parallel (slot 1 + its index), so that
+// every core gets independent subtrees. `slots(n)` is told the number of slots before the parallel
+// part starts.
+template <class Step, class Slots>
+void parallel_dual_traversal(std::size_t fan_out, Step&& step, Slots&& slots) {
+    std::vector<NodePair> frontier{{0, 0}};
+    std::vector<NodePair> next;
+    while (!frontier.empty() && frontier.size() < fan_out) {
+        next.clear();
+        for (const auto& pair : frontier) {
+            step(pair, next, std::size_t{0});
+        }
+        frontier.swap(next);
+    }
+    slots(frontier.size() + 1);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 4),
+                      [&](const auto& range) {
+                          std::vector<NodePair> stack;
+                          for (auto k = range.begin(); k != range.end(); ++k) {
+                              stack.assign(1, frontier[k]);
+                              while (!stack.empty()) {
+                                  const NodePair pair = stack.back();
+                                  stack.pop_back();
+                                  step(pair, stack, k + 1);
+                              }
+                          }
+                      });
+}
 
 }  // namespace
 
+// Intra-object nearest search. A node pair is culled when its box distance reaches the larger of
+// the two nodes' thresholds, where a node's threshold comes from the largest bound in its subtree
+// (computed once at the start; bounds only shrink, so it stays valid); a triangle pair when its
+// box distance reaches the larger of the two triangles' current thresholds.
 void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
                            PairVisitor visit) const {
     const Bvh& bvh = m_entries[a].bvh;
     const auto& nodes = bvh.nodes();
+    const auto& boxes = bvh.triangle_boxes();
+    const auto& order = bvh.order();
+    const auto& tris = scene[a].topology->triangles();
     const double slack = pair_slack(scene, a, a);
     // Largest bound per subtree, bottom-up (children have larger indices than their parent).
     std::vector<double> node_threshold(nodes.size());
@@ -248,149 +246,89 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         double m = 0.0;
         if (n.leaf()) {
             for (auto k = n.first; k < n.first + n.count; ++k) {
-                m = std::max(m, bound_sq(bvh.order()[k]));
+                m = std::max(m, bound_sq(order[k]));
             }
             node_threshold[i] = cull_threshold_sq(m, slack);
         } else {
             node_threshold[i] = std::max(node_threshold[i + 1], node_threshold[n.first]);
         }
     }
-    SelfTraversal tr{bvh, scene[a].topology->triangles(), node_threshold, bound_sq, visit, slack};
-    std::vector<SelfTraversal::NodePair> frontier{{0, 0}};
-    std::vector<SelfTraversal::NodePair> next;
-    while (!frontier.empty() && frontier.size() < 512) {
-        next.clear();
-        for (auto [i, j] : frontier) {
-            tr.step(i, j, next);
+    auto threshold_of = [&](std::uint32_t t) { return cull_threshold_sq(bound_sq(t), slack); };
+    auto leaves = [&](const Bvh::Node& x, const Bvh::Node& y, bool same_node) {
+        double ty[Bvh::LEAF_SIZE];
+        for (std::uint32_t q = 0; q < y.count; ++q) {
+            ty[q] = threshold_of(order[y.first + q]);
         }
-        frontier.swap(next);
-    }
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, frontier.size(), 4),
-                      [&](const auto& range) {
-                          std::vector<SelfTraversal::NodePair> stack;
-                          for (auto k = range.begin(); k != range.end(); ++k) {
-                              stack.assign(1, frontier[k]);
-                              while (!stack.empty()) {
-                                  const auto [i, j] = stack.back();
-                                  stack.pop_back();
-                                  tr.step(i, j, stack);
-                              }
-                          }
-                      });
+        for (std::uint32_t p = 0; p < x.count; ++p) {
+            const auto t = order[x.first + p];
+            const double tt = same_node ? ty[p] : threshold_of(t);
+            for (std::uint32_t q = same_node ? p + 1 : 0; q < y.count; ++q) {
+                const auto u = order[y.first + q];
+                if (share_vertex(tris[t], tris[u])) {
+                    continue;
+                }
+                if (box_squared_distance(boxes[t], boxes[u]) < std::max(tt, ty[q])) {
+                    visit(std::min(t, u), std::max(t, u));
+                }
+            }
+        }
+    };
+    auto near = [&](std::uint32_t i, std::uint32_t j) {
+        return box_squared_distance(nodes[i].box, nodes[j].box) <
+               std::max(node_threshold[i], node_threshold[j]);
+    };
+    parallel_dual_traversal(
+        512,
+        [&](NodePair pair, std::vector<NodePair>& next, std::size_t) {
+            dual_step(bvh, bvh, true, pair, next, leaves, near);
+        },
+        [](std::size_t) {});
 }
 
-namespace {
-
-// Collects leaf-level candidate pairs of a dual traversal with a fixed radius. `same` is true when
-// both trees are the same object's (self pairs: ta < tb, non-adjacent only).
-struct RadiusTraversal {
-    const Bvh& ba;
-    const Bvh& bb;
-    const std::vector<TriangleIndices>* tris;  // set when same
-    bool same;
-    double threshold_sq;  // cull_threshold_sq(radius^2, slack)
-
-    void emit(std::uint32_t ta, std::uint32_t tb, std::vector<TrianglePair>& out) const {
-        if (same) {
-            if (ta == tb || share_vertex((*tris)[ta], (*tris)[tb])) {
-                return;
-            }
-            if (ta > tb) {
-                std::swap(ta, tb);
-            }
-        }
-        if (box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]) <=
-            threshold_sq) {
-            out.emplace_back(ta, tb);
-        }
-    }
-
-    // Expands node pair (i, j) one level; leaf pairs are emitted, child pairs pushed to `next`.
-    void step(std::uint32_t i, std::uint32_t j,
-              std::vector<std::pair<std::uint32_t, std::uint32_t>>& next,
-              std::vector<TrianglePair>& out) const {
-        const auto& x = ba.nodes()[i];
-        const auto& y = bb.nodes()[j];
-        if (same && i == j) {
-            if (x.leaf()) {
-                for (auto p = x.first; p < x.first + x.count; ++p) {
-                    for (auto q = p + 1; q < x.first + x.count; ++q) {
-                        emit(ba.order()[p], ba.order()[q], out);
-                    }
-                }
-                return;
-            }
-            next.emplace_back(i + 1, i + 1);
-            next.emplace_back(x.first, x.first);
-            push_if_near(i + 1, x.first, next);
-            return;
-        }
-        if (x.leaf() && y.leaf()) {
-            for (auto p = x.first; p < x.first + x.count; ++p) {
-                for (auto q = y.first; q < y.first + y.count; ++q) {
-                    emit(ba.order()[p], bb.order()[q], out);
-                }
-            }
-            return;
-        }
-        const bool split_a = !x.leaf() && (y.leaf() || node_size(x) >= node_size(y));
-        if (split_a) {
-            push_if_near(i + 1, j, next);
-            push_if_near(x.first, j, next);
-        } else {
-            push_if_near(i, j + 1, next);
-            push_if_near(i, y.first, next);
-        }
-    }
-
-    void push_if_near(std::uint32_t i, std::uint32_t j,
-                      std::vector<std::pair<std::uint32_t, std::uint32_t>>& next) const {
-        if (box_squared_distance(ba.nodes()[i].box, bb.nodes()[j].box) <= threshold_sq) {
-            next.emplace_back(i, j);
-        }
-    }
-
-    void run(std::uint32_t i, std::uint32_t j, std::vector<TrianglePair>& out) const {
-        std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{i, j}};
-        while (!stack.empty()) {
-            const auto [x, y] = stack.back();
-            stack.pop_back();
-            step(x, y, stack, out);
-        }
-    }
-};
-
-}  // namespace
-
+// Every triangle pair whose boxes come within the radius (widened by the rounding slack); for one
+// object against itself, non-adjacent pairs with ta < tb.
 void BvhCuller::pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
                              std::vector<TrianglePair>& out) const {
     const Bvh& ba = m_entries[a].bvh;
     const Bvh& bb = m_entries[b].bvh;
-    RadiusTraversal tr{ba, bb, &scene[a].topology->triangles(), a == b,
-                       cull_threshold_sq(radius * radius, pair_slack(scene, a, b))};
-    if (a != b && box_squared_distance(ba.nodes()[0].box, bb.nodes()[0].box) > tr.threshold_sq) {
+    const bool same = a == b;
+    const auto& tris = scene[a].topology->triangles();
+    const double threshold_sq = cull_threshold_sq(radius * radius, pair_slack(scene, a, b));
+    if (!same && box_squared_distance(ba.nodes()[0].box, bb.nodes()[0].box) > threshold_sq) {
         return;
     }
-    // Expand breadth-first into enough independent node pairs to keep every core busy, then
-    // finish each subtree pair in parallel.
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> frontier{{0, 0}};
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> next;
-    while (!frontier.empty() && frontier.size() < 256) {
-        next.clear();
-        for (auto [i, j] : frontier) {
-            tr.step(i, j, next, out);
-        }
-        frontier.swap(next);
-    }
-    if (frontier.empty()) {
-        return;
-    }
-    std::vector<std::vector<TrianglePair>> parts(frontier.size());
-    tbb::parallel_for(std::size_t{0}, frontier.size(), [&](std::size_t k) {
-        tr.run(frontier[k].first, frontier[k].second, parts[k]);
-    });
-    for (auto& p : parts) {
-        out.insert(out.end(), p.begin(), p.end());
+    std::vector<std::vector<TrianglePair>> parts;
+    auto near = [&](std::uint32_t i, std::uint32_t j) {
+        return box_squared_distance(ba.nodes()[i].box, bb.nodes()[j].box) <= threshold_sq;
+    };
+    auto step = [&](NodePair pair, std::vector<NodePair>& next, std::size_t slot) {
+        auto& sink = slot == 0 ? out : parts[slot];
+        auto emit = [&](std::uint32_t ta, std::uint32_t tb) {
+            if (same) {
+                if (ta == tb || share_vertex(tris[ta], tris[tb])) {
+                    return;
+                }
+                if (ta > tb) {
+                    std::swap(ta, tb);
+                }
+            }
+            if (box_squared_distance(ba.triangle_boxes()[ta], bb.triangle_boxes()[tb]) <=
+                threshold_sq) {
+                sink.emplace_back(ta, tb);
+            }
+        };
+        auto leaves = [&](const Bvh::Node& x, const Bvh::Node& y, bool same_node) {
+            for (auto p = x.first; p < x.first + x.count; ++p) {
+                for (auto q = same_node ? p + 1 : y.first; q < y.first + y.count; ++q) {
+                    emit(ba.order()[p], bb.order()[q]);
+                }
+            }
+        };
+        dual_step(ba, bb, same, pair, next, leaves, near);
+    };
+    parallel_dual_traversal(256, step, [&](std::size_t n) { parts.resize(n); });
+    for (std::size_t k = 1; k < parts.size(); ++k) {
+        out.insert(out.end(), parts[k].begin(), parts[k].end());
     }
 }
 
