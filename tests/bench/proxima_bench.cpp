@@ -398,7 +398,11 @@ Machine machine() {
     char buf[64];
     std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
     m.date = buf;
-    m.threads = tbb::this_task_arena::max_concurrency();
+    // --threads caps TBB through global_control, which the arena's concurrency does not show.
+    m.threads = std::min<int>(
+        tbb::this_task_arena::max_concurrency(),
+        static_cast<int>(
+            tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
     return m;
 }
 
@@ -967,7 +971,7 @@ int main(int argc, char** argv) {
                       "non-adjacent pair (BASELINES.md)."};
         tables.push_back(t);
         tables.push_back(self);
-    } else {
+    } else if (!real.empty()) {
         std::printf("real frames: none found under %s/frames (use --data DIR); skipped\n",
                     opt.data.c_str());
     }
