@@ -76,7 +76,9 @@ std::string fixed(double v, int digits = 2) {
     std::snprintf(buf, sizeof buf, "%.*f", digits, v);
     return buf;
 }
-std::string ms(double seconds) { return fixed(1e3 * seconds, seconds < 0.01 ? 3 : 2); }
+std::string ms(double seconds) {
+    return fixed(1e3 * seconds, seconds < 0.01 ? 3 : 2);
+}
 std::string count(double v) {
     if (!std::isfinite(v)) {
         return "-";
@@ -192,7 +194,7 @@ std::vector<fcl::Vector3d> to_fcl(const std::vector<Vec3>& vertices) {
 }
 
 class FclPeer {
-public:
+  public:
     // Brings FCL up to date with the scene and returns the seconds it took. Objects with the same
     // id and topology as before are moved (vertex replacement + bottom-up refit); new or changed
     // ones are built, and then the manager is rebuilt.
@@ -252,7 +254,7 @@ public:
         return out;
     }
 
-private:
+  private:
     struct Entry {
         ObjectId id = 0;
         std::uint64_t topology_version = 0;
@@ -319,10 +321,9 @@ void report_mismatches(const std::string& where, const Scene& scene,
     for (std::size_t m = 0; m < mismatches.size() && m < 5; ++m) {
         const auto& x = mismatches[m];
         char buf[512];
-        std::snprintf(buf, sizeof buf,
-                      "MISMATCH %s: object %zu ('%s'): ours %.17g, FCL %.17g (diff %.3g)",
-                      where.c_str(), x.object, scene[x.object].name.c_str(), x.ours, x.fcl,
-                      x.ours - x.fcl);
+        std::snprintf(
+            buf, sizeof buf, "MISMATCH %s: object %zu ('%s'): ours %.17g, FCL %.17g (diff %.3g)",
+            where.c_str(), x.object, scene[x.object].name.c_str(), x.ours, x.fcl, x.ours - x.fcl);
         std::cerr << buf << "\n";
         log.emplace_back(buf);
     }
@@ -399,10 +400,9 @@ Machine machine() {
     std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
     m.date = buf;
     // --threads caps TBB through global_control, which the arena's concurrency does not show.
-    m.threads = std::min<int>(
-        tbb::this_task_arena::max_concurrency(),
-        static_cast<int>(
-            tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
+    m.threads = std::min<int>(tbb::this_task_arena::max_concurrency(),
+                              static_cast<int>(tbb::global_control::active_value(
+                                  tbb::global_control::max_allowed_parallelism)));
     return m;
 }
 
@@ -499,8 +499,7 @@ ProceduralSummary run_procedural(const std::string& name, const Options& opt,
             t0 = Clock::now();
             auto applied = engine.scene().apply(std::move(update));
             if (!applied.ok()) {
-                std::cerr << name << " frame " << k << ": " << applied.status().to_string()
-                          << "\n";
+                std::cerr << name << " frame " << k << ": " << applied.status().to_string() << "\n";
                 std::exit(1);
             }
         }
@@ -580,8 +579,8 @@ struct RealSummary {
 };
 
 struct FramePair {
-    std::vector<TriangleMesh> t0;              // objects at t0
-    std::vector<std::vector<Vec3>> t1;         // the same objects' vertices at t1
+    std::vector<TriangleMesh> t0;       // objects at t0
+    std::vector<std::vector<Vec3>> t1;  // the same objects' vertices at t1
 };
 
 // Reads both frames without welding: indexed PLY files already share their vertices, and welding
@@ -643,8 +642,8 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
     ProximityEngine engine;
     const auto load_start = Clock::now();
     for (std::size_t c = 0; c < pair->t0.size(); ++c) {
-        auto id = engine.scene().add_object({goal.label + std::string(".") + std::to_string(c),
-                                             pair->t0[c]});
+        auto id = engine.scene().add_object(
+            {goal.label + std::string(".") + std::to_string(c), pair->t0[c]});
         if (!id.ok()) {
             s.skipped = id.status().to_string();
             return s;
@@ -824,11 +823,18 @@ int main(int argc, char** argv) {
     }
     if (!procedural.empty()) {
         Table t;
-        t.title = "Procedural scenes: separation + self (inter + intra) per frame, BVH culler, "
-                  "median of frames 1.." + std::to_string(opt.frames - 1) + " (ms)";
-        t.header = {"scene",      "objects", "triangles", "update",   "prepare", "broad",
-                    "separation", "self",    "query",     "frame",    "goal",    "met",
-                    "exact tests", "brute-force tests", "culled"};
+        t.title =
+            "Procedural scenes: separation + self (inter + intra) per frame, BVH culler, "
+            "median of frames 1.." +
+            std::to_string(opt.frames - 1) + " (ms)";
+        t.header = {"scene",       "objects",
+                    "triangles",   "update",
+                    "prepare",     "broad",
+                    "separation",  "self",
+                    "query",       "frame",
+                    "goal",        "met",
+                    "exact tests", "brute-force tests",
+                    "culled"};
         for (const auto& p : procedural) {
             const auto& last = p.frames.back();
             const double frame = median(frame_totals(p.frames, false));
@@ -841,20 +847,22 @@ int main(int argc, char** argv) {
                               ms(median_of(p.frames, &FrameRow::broad)),
                               ms(median_of(p.frames, &FrameRow::separation)),
                               ms(median_of(p.frames, &FrameRow::self)),
-                              ms(median_of(p.frames, &FrameRow::total)), ms(frame),
-                              fixed(goal, 0), 1e3 * frame <= goal ? "yes" : "no", count(exact),
-                              sci(brute), fixed(brute / std::max(exact, 1.0), 0) + "x"});
+                              ms(median_of(p.frames, &FrameRow::total)), ms(frame), fixed(goal, 0),
+                              1e3 * frame <= goal ? "yes" : "no", count(exact), sci(brute),
+                              fixed(brute / std::max(exact, 1.0), 0) + "x"});
         }
-        t.notes = {"update = applying the frame's SceneUpdate (validation, boxes; generating "
-                   "it is not counted); query = ProximityEngine::query total (prepare + broad + "
-                   "separation + self); frame = update + query, compared with the goal.",
-                   "objects and triangles at the last frame (breaking: after the break)."};
+        t.notes = {
+            "update = applying the frame's SceneUpdate (validation, boxes; generating "
+            "it is not counted); query = ProximityEngine::query total (prepare + broad + "
+            "separation + self); frame = update + query, compared with the goal.",
+            "objects and triangles at the last frame (breaking: after the break)."};
         tables.push_back(t);
 
         Table f;
         f.title = "Procedural scenes: object-level separation vs FCL 0.7 (same frames, median, ms)";
-        f.header = {"scene", "objects", "FCL move", "FCL query", "FCL total",
-                    "ours (update+prepare+broad+separation)", "FCL / ours", "mismatches"};
+        f.header = {"scene",      "objects",   "FCL move",
+                    "FCL query",  "FCL total", "ours (update+prepare+broad+separation)",
+                    "FCL / ours", "mismatches"};
         for (const auto& p : procedural) {
             const double fcl_total = median([&] {
                 std::vector<double> v;
@@ -873,17 +881,29 @@ int main(int argc, char** argv) {
                               ms(median_of(p.frames, &FrameRow::fcl_query)), ms(fcl_total),
                               ms(ours), fixed(fcl_total / ours, 1) + "x", std::to_string(mism)});
         }
-        f.notes = {"mismatches: objects whose separation distance differs from FCL's by more "
-                   "than 1e-9 relative + 1e-12, over all frames including frame 0."};
+        f.notes = {
+            "mismatches: objects whose separation distance differs from FCL's by more "
+            "than 1e-9 relative + 1e-12, over all frames including frame 0."};
         tables.push_back(f);
 
         if (opt.per_frame) {
             for (const auto& p : procedural) {
                 Table pf;
                 pf.title = p.name + ": every frame (ms)";
-                pf.header = {"frame", "objects", "gen", "update", "prepare", "broad",
-                             "separation", "self", "query", "exact tests", "brute-force tests",
-                             "FCL move", "FCL query", "mismatches"};
+                pf.header = {"frame",
+                             "objects",
+                             "gen",
+                             "update",
+                             "prepare",
+                             "broad",
+                             "separation",
+                             "self",
+                             "query",
+                             "exact tests",
+                             "brute-force tests",
+                             "FCL move",
+                             "FCL query",
+                             "mismatches"};
                 for (std::size_t k = 0; k < p.frames.size(); ++k) {
                     const auto& r = p.frames[k];
                     pf.rows.push_back({std::to_string(k), std::to_string(r.objects), ms(r.gen),
@@ -892,8 +912,9 @@ int main(int argc, char** argv) {
                                        ms(r.fcl_move), ms(r.fcl_query),
                                        std::to_string(r.mismatches)});
                 }
-                pf.notes = {"frame 0 loads the scene: its update is adding the objects, its "
-                            "prepare builds every hierarchy, its FCL move builds FCL's models."};
+                pf.notes = {
+                    "frame 0 loads the scene: its update is adding the objects, its "
+                    "prepare builds every hierarchy, its FCL move builds FCL's models."};
                 tables.push_back(pf);
             }
         }
@@ -923,13 +944,15 @@ int main(int argc, char** argv) {
         Table t;
         t.title = "Real frames: object-level separation per frame vs FCL 0.7, median of " +
                   std::to_string(opt.reps) + " steps (ms)";
-        t.header = {"scene",      "objects", "triangles", "FCL build", "our build", "FCL move",
-                    "FCL query",  "FCL total", "update",  "prepare",   "broad",     "separation",
-                    "ours total", "FCL / ours", "goal",   "met",       "exact tests",
-                    "mismatches"};
+        t.header = {"scene",    "objects",     "triangles",  "FCL build",  "our build",
+                    "FCL move", "FCL query",   "FCL total",  "update",     "prepare",
+                    "broad",    "separation",  "ours total", "FCL / ours", "goal",
+                    "met",      "exact tests", "mismatches"};
         Table self;
-        self.title = "Real frames: self distance (every triangle's closest non-adjacent triangle) "
-                     "per frame, median of " + std::to_string(opt.reps) + " steps (ms)";
+        self.title =
+            "Real frames: self distance (every triangle's closest non-adjacent triangle) "
+            "per frame, median of " +
+            std::to_string(opt.reps) + " steps (ms)";
         self.header = {"scene", "triangles", "self", "exact tests", "goal", "met"};
         for (const auto& r : real) {
             if (!r.skipped.empty()) {
@@ -947,10 +970,9 @@ int main(int argc, char** argv) {
             t.rows.push_back({r.name, std::to_string(r.objects), std::to_string(r.triangles),
                               ms(r.fcl_build), ms(r.our_build), ms(median(r.fcl_move)),
                               ms(median(r.fcl_query)), ms(f), ms(median(r.update)),
-                              ms(median(r.prepare)), ms(median(r.broad)),
-                              ms(median(r.separation)), ms(o), fixed(f / o, 1) + "x",
-                              fixed(r.separation_goal, 1), met ? "yes" : "no",
-                              count(median(r.separation_exact)),
+                              ms(median(r.prepare)), ms(median(r.broad)), ms(median(r.separation)),
+                              ms(o), fixed(f / o, 1) + "x", fixed(r.separation_goal, 1),
+                              met ? "yes" : "no", count(median(r.separation_exact)),
                               std::to_string(r.mismatches) + " / " + std::to_string(r.checks)});
             const double sm = median(r.self);
             const bool has_goal = !std::isnan(r.self_goal);
@@ -959,16 +981,18 @@ int main(int argc, char** argv) {
                                  has_goal ? fixed(r.self_goal, 0) : "-",
                                  has_goal ? (1e3 * sm <= r.self_goal ? "yes" : "no") : "-"});
         }
-        t.notes = {"build: FCL = building every model and the manager; ours = adding the objects "
-                   "(validation, connectivity) + the first separation query, which builds every "
-                   "hierarchy.",
-                   "ours total = update (apply positions) + prepare (refit) + broad + separation; "
-                   "goal (ms) from BASELINES.md, met = within the goal and >= 3x faster than FCL.",
-                   "exact tests: triangle pairs the separation query tested exactly; mismatches: "
-                   "objects differing from FCL / queries checked (each query checks every "
-                   "object)."};
-        self.notes = {"FCL has no self-distance query; brute force costs about 48 ns per "
-                      "non-adjacent pair (BASELINES.md)."};
+        t.notes = {
+            "build: FCL = building every model and the manager; ours = adding the objects "
+            "(validation, connectivity) + the first separation query, which builds every "
+            "hierarchy.",
+            "ours total = update (apply positions) + prepare (refit) + broad + separation; "
+            "goal (ms) from BASELINES.md, met = within the goal and >= 3x faster than FCL.",
+            "exact tests: triangle pairs the separation query tested exactly; mismatches: "
+            "objects differing from FCL / queries checked (each query checks every "
+            "object)."};
+        self.notes = {
+            "FCL has no self-distance query; brute force costs about 48 ns per "
+            "non-adjacent pair (BASELINES.md)."};
         tables.push_back(t);
         tables.push_back(self);
     } else if (!real.empty()) {

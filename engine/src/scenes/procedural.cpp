@@ -23,7 +23,9 @@ constexpr double PI = std::numbers::pi;
 // geometry whatever the sequence length and whatever the thread count.
 constexpr double FPS = 30.0;
 
-double frame_time(std::size_t k) { return static_cast<double>(k) / FPS; }
+double frame_time(std::size_t k) {
+    return static_cast<double>(k) / FPS;
+}
 
 double smoothstep(double e0, double e1, double x) {
     const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
@@ -33,7 +35,7 @@ double smoothstep(double e0, double e1, double x) {
 // Uniform doubles from mt19937_64's raw output: the engine's sequence is fixed by the standard,
 // std::uniform_real_distribution's mapping is not (it differs between standard libraries).
 class Rng {
-public:
+  public:
     explicit Rng(std::uint64_t seed) : m_gen(seed) {}
     double uniform(double lo, double hi) {
         return lo + (hi - lo) * static_cast<double>(m_gen() >> 11) * 0x1.0p-53;
@@ -49,7 +51,7 @@ public:
         }
     }
 
-private:
+  private:
     std::mt19937_64 m_gen;
 };
 
@@ -300,10 +302,9 @@ std::vector<Vec3> rounded_box(const std::vector<Vec3>& sphere, double q) {
     std::vector<Vec3> out;
     out.reserve(sphere.size());
     for (const auto& d : sphere) {
-        const double s =
-            std::pow(std::pow(std::abs(d.x), q) + std::pow(std::abs(d.y), q) +
-                         std::pow(std::abs(d.z), q),
-                     -1.0 / q);
+        const double s = std::pow(
+            std::pow(std::abs(d.x), q) + std::pow(std::abs(d.y), q) + std::pow(std::abs(d.z), q),
+            -1.0 / q);
         out.push_back(s * d);
     }
     return out;
@@ -446,9 +447,7 @@ Part shaped_part(std::string name, TriangleMesh local, Map map, bool moves = tru
     part.vertex_count = local.vertices.size();
     part.moves = moves;
     auto rest = std::make_shared<const std::vector<Vec3>>(std::move(local.vertices));
-    part.place = [rest, map](std::size_t k, std::vector<Vec3>& out) {
-        map(k, *rest, out);
-    };
+    part.place = [rest, map](std::size_t k, std::vector<Vec3>& out) { map(k, *rest, out); };
     return part;
 }
 
@@ -591,8 +590,8 @@ void place_cloth(std::size_t k, std::vector<Vec3>& out) {
                 az = (remapped - sway) / 9.0;
                 horizontal += amplitude * (1.0 + bulge);
             }
-            out[static_cast<std::size_t>(j) * CLOTH_N + i] = {horizontal * std::cos(az),
-                                                              y + lift, horizontal * std::sin(az)};
+            out[static_cast<std::size_t>(j) * CLOTH_N + i] = {horizontal * std::cos(az), y + lift,
+                                                              horizontal * std::sin(az)};
         }
     }
 }
@@ -645,13 +644,17 @@ struct RampPath {
 };
 
 constexpr int RAMP_COUNT = 4;
-constexpr double RAMP_SLOPE = 0.25;      // drop per unit of x
-constexpr double RAMP_THICK = 0.05;      // slab thickness
+constexpr double RAMP_SLOPE = 0.25;       // drop per unit of x
+constexpr double RAMP_THICK = 0.05;       // slab thickness
 constexpr double RAMP_HALF_WIDTH = 0.32;  // along z
 constexpr double RAMP_OBJECT_MAX = 0.062;
 
-double ramp_half_length(int j) { return 1.0 + 0.15 * j; }
-double ramp_direction(int j) { return j % 2 == 0 ? 1.0 : -1.0; }  // +1: descends toward +x
+double ramp_half_length(int j) {
+    return 1.0 + 0.15 * j;
+}
+double ramp_direction(int j) {
+    return j % 2 == 0 ? 1.0 : -1.0;
+}  // +1: descends toward +x
 double ramp_centre_y(int j) {
     double y = 3.0;
     for (int i = 0; i < j; ++i) {
@@ -758,15 +761,15 @@ ProceduralScene cloth_ball(std::size_t frames) {
     for (auto& v : ball.vertices) {
         v = BALL_RADIUS * v;
     }
-    seq->phases[0].push_back(shaped_part(
-        "ball", std::move(ball),
-        [](std::size_t k, const std::vector<Vec3>& rest, std::vector<Vec3>& out) {
-            const Mat3 r = rotation({0.3, 1.0, 0.2}, 1.5 * frame_time(k));
-            out.resize(rest.size());
-            for (std::size_t v = 0; v < rest.size(); ++v) {
-                out[v] = r * rest[v];
-            }
-        }));
+    seq->phases[0].push_back(
+        shaped_part("ball", std::move(ball),
+                    [](std::size_t k, const std::vector<Vec3>& rest, std::vector<Vec3>& out) {
+                        const Mat3 r = rotation({0.3, 1.0, 0.2}, 1.5 * frame_time(k));
+                        out.resize(rest.size());
+                        for (std::size_t v = 0; v < rest.size(); ++v) {
+                            out[v] = r * rest[v];
+                        }
+                    }));
     return make_scene("cloth-ball",
                       "square cloth (85 x 85 vertices) dropping and draping in folds over a "
                       "rotating ball",
@@ -827,8 +830,7 @@ ProceduralScene bowl(std::size_t frames) {
                 out[v] = centre + spin * wobble(local[v], squash, 0.04, 6.0 * t + phase, radius);
             }
         };
-        seq->phases[0].push_back(
-            shaped_part("object" + std::to_string(i), std::move(mesh), map));
+        seq->phases[0].push_back(shaped_part("object" + std::to_string(i), std::move(mesh), map));
     }
     return make_scene("bowl", "ten deforming spheres, rounded boxes and tori settling in a bowl",
                       frames, seq);
@@ -857,8 +859,8 @@ ProceduralScene ramps(std::size_t frames) {
         const Vec3 tumble_axis = Vec3{0, 0, 1} + 0.3 * rng.unit_vector();
         // 176-180 triangles: spheres 10 x 10, rounded boxes and tori 11 x 9.
         const int kind = i % 3;
-        auto mesh = kind == 0 ? small_object(kind, radius, 10, 10)
-                              : small_object(kind, radius, 11, 9);
+        auto mesh =
+            kind == 0 ? small_object(kind, radius, 10, 10) : small_object(kind, radius, 11, 9);
         auto map = [=](std::size_t k, const std::vector<Vec3>& local, std::vector<Vec3>& out) {
             const double t = frame_time(k);
             // Speed surges make neighbours in a lane close in and separate again.
@@ -873,8 +875,7 @@ ProceduralScene ramps(std::size_t frames) {
                 out[v] = centre + roll * wobble(local[v], squash, 0.03, 4.0 * t + phase, radius);
             }
         };
-        seq->phases[0].push_back(
-            shaped_part("object" + std::to_string(i), std::move(mesh), map));
+        seq->phases[0].push_back(shaped_part("object" + std::to_string(i), std::move(mesh), map));
     }
     return make_scene("ramps",
                       "200 deforming objects (176-180 triangles each) sliding down four ramps",
@@ -904,14 +905,14 @@ ProceduralScene breaking(std::size_t frames) {
         for (auto& v : mesh.vertices) {
             v = BREAK_RADIUS * v;
         }
-        seq->phases[0].push_back(shaped_part(
-            name, std::move(mesh),
-            [=](std::size_t k, const std::vector<Vec3>& local, std::vector<Vec3>& out) {
-                out.resize(local.size());
-                for (std::size_t v = 0; v < local.size(); ++v) {
-                    out[v] = ball_shape(k, local[v]);
-                }
-            }));
+        seq->phases[0].push_back(
+            shaped_part(name, std::move(mesh),
+                        [=](std::size_t k, const std::vector<Vec3>& local, std::vector<Vec3>& out) {
+                            out.resize(local.size());
+                            for (std::size_t v = 0; v < local.size(); ++v) {
+                                out[v] = ball_shape(k, local[v]);
+                            }
+                        }));
 
         // Cut longitudes, jittered so no two balls break alike.
         std::vector<double> cuts;
