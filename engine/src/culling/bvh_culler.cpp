@@ -24,21 +24,6 @@ double pair_slack(const Scene& scene, std::size_t a, std::size_t b) {
     return rounding_slack(std::max(coordinate_scale(scene[a].box), coordinate_scale(scene[b].box)));
 }
 
-// Tracks the threshold of a bound that a visitor may lower, recomputing it only when it changed.
-struct Threshold {
-    const double& bound_sq;
-    double slack;
-    double seen = -1.0;
-    double value = 0.0;
-    double get() {
-        if (bound_sq != seen) {
-            seen = bound_sq;
-            value = cull_threshold_sq(bound_sq, slack);
-        }
-        return value;
-    }
-};
-
 double center_gap(const Aabb& a, const Aabb& b) {
     return squared_norm(a.center() - b.center());
 }
@@ -95,7 +80,7 @@ void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b
         std::uint32_t i, j;
         double d;
     };
-    Threshold th{bound_sq, pair_slack(scene, a, b)};
+    CullThreshold th(bound_sq, pair_slack(scene, a, b));
     std::vector<Item> stack;
     stack.reserve(64);
     const double d0 = box_squared_distance(na[0].box, nb[0].box);

@@ -90,18 +90,13 @@ PairSearch search_pair(const Scene& scene, const Culler& culler, std::size_t i, 
     PairSearch r;
     const SceneObject& a = scene[i];
     const SceneObject& b = scene[j];
-    double threshold_sq = cull_threshold_sq(bound_sq, slack);
-    double threshold_of = bound_sq;
+    CullThreshold threshold(bound_sq, slack);
     culler.nearest_between(scene, i, j, bound_sq, [&](std::uint32_t ta, std::uint32_t tb) {
         const Triangle x = corners(a, ta);
         const Triangle y = corners(b, tb);
         if (std::isfinite(bound_sq)) {
-            if (threshold_of != bound_sq) {
-                threshold_sq = cull_threshold_sq(bound_sq, slack);
-                threshold_of = bound_sq;
-            }
             const double lb = triangle_lower_bound(x, y, slack);
-            if (lb * lb >= threshold_sq) {
+            if (lb * lb >= threshold.get()) {
                 return;
             }
         }

@@ -21,6 +21,26 @@ inline double cull_threshold_sq(double best_sq, double slack) {
     return b * b;
 }
 
+// The cull threshold of a bound that a search may lower as it goes (a reference to the live
+// bound), recomputed only when the bound changed: a square root per improvement, not per test.
+class CullThreshold {
+  public:
+    CullThreshold(const double& bound_sq, double slack) : m_bound_sq(bound_sq), m_slack(slack) {}
+    double get() {
+        if (m_bound_sq != m_seen) {
+            m_seen = m_bound_sq;
+            m_value = cull_threshold_sq(m_bound_sq, m_slack);
+        }
+        return m_value;
+    }
+
+  private:
+    const double& m_bound_sq;
+    double m_slack;
+    double m_seen = -1.0;
+    double m_value = 0.0;
+};
+
 // Largest coordinate magnitude of a box (for rounding_slack).
 inline double coordinate_scale(const Aabb& box) {
     double s = 0.0;
