@@ -14,6 +14,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli/commands.hpp"
 #include "client/proxima_client.hpp"
 #include "common/json_output.hpp"
 #include "common/local_scene.hpp"
@@ -586,7 +587,14 @@ int main(int argc, char** argv) {
         info->add_option("--server", info_args.server, "The daemon's HOST:PORT")->required();
         info->add_flag("--json", info_args.json, "Print one JSON object");
 
+        int command_exit = -1;
+        cli::add_ccd_command(app, command_exit);
+        cli::add_ccd_queries_command(app, command_exit);
+
         CLI11_PARSE(app, argc, argv);
+        if (command_exit >= 0) {
+            return command_exit;
+        }
         if (*version) {
             std::printf("proxima 0.1.0\n");
             return 0;
