@@ -77,6 +77,8 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
             s = read_string(value, key, base.log_level);
         } else if (key == "worker-threads") {
             s = read_unsigned(value, key, base.worker_threads);
+        } else if (key == "gpu") {
+            s = read_string(value, key, base.gpu);
         } else {
             // A misspelt key silently falling back to a default is how limits get lost.
             s = invalid_argument("unknown config key '" + key +
@@ -123,6 +125,9 @@ Status validate_config(const ServerConfig& config) {
     if (!level_ok) {
         return invalid_argument("log-level '" + config.log_level +
                                 "' is not one of trace, debug, info, warn, error, critical, off");
+    }
+    if (config.gpu != "auto" && config.gpu != "off") {
+        return invalid_argument("gpu '" + config.gpu + "' is not one of auto, off");
     }
     return {};
 }
@@ -186,6 +191,11 @@ ConfigOutcome load_config(int argc, char** argv) {
                        "threads for engine work; 0: max(4, hardware threads)")
             ->default_str("0"),
         [&](ServerConfig& c) { c.worker_threads = flags.worker_threads; });
+    add(app.add_option("--gpu", flags.gpu,
+                       "auto: use the GPU (headless EGL) for the Voronoi culler when EGL starts, "
+                       "else the CPU backend; off: CPU backend only")
+            ->default_str(defaults.gpu),
+        [&](ServerConfig& c) { c.gpu = flags.gpu; });
 
     try {
         app.parse(argc, argv);

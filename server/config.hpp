@@ -34,6 +34,9 @@ struct ServerConfig {
     // Threads that run engine work off gRPC's callback threads; 0 picks max(4, hardware threads).
     // Each query also uses oneTBB's threads for its own parallel loops.
     unsigned worker_threads = 0;
+    // "auto": start the headless EGL context for the GPU Voronoi culler, and fall back to the CPU
+    // backend (logging why) when EGL cannot start; "off": CPU backend only.
+    std::string gpu = "auto";
 };
 
 // Overlays the keys of a JSON object onto `base`. Keys are the long flag names without the
