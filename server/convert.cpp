@@ -232,7 +232,48 @@ StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
         out.queries.tolerance = q.tolerance();
     }
     out.self_points = q.self_points();
+    out.ccd = q.ccd();
+    if (q.has_ccd_min_distance()) {
+        if (!std::isfinite(q.ccd_min_distance()) || q.ccd_min_distance() < 0.0) {
+            return invalid_argument(
+                "queries.ccd_min_distance must be a finite distance >= 0, got " +
+                std::to_string(q.ccd_min_distance()));
+        }
+        out.ccd_request.elementary.min_distance = q.ccd_min_distance();
+    }
     return out;
+}
+
+void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out) {
+    out->mutable_pairs()->Reserve(static_cast<int>(result.pairs.size()));
+    for (const auto& p : result.pairs) {
+        auto* r = out->add_pairs();
+        r->set_kind(p.kind == ccd::CcdKind::vertex_face ? v1::CCD_VERTEX_FACE : v1::CCD_EDGE_EDGE);
+        r->set_object(p.object);
+        r->set_primitive(p.primitive);
+        r->set_other(p.other);
+        r->set_other_primitive(p.other_primitive);
+        r->set_toi(p.toi);
+        r->set_capped(p.capped);
+    }
+    for (const auto& o : result.object_pairs) {
+        auto* r = out->add_object_pairs();
+        r->set_object(o.object);
+        r->set_other(o.other);
+        r->set_toi(o.toi);
+        r->set_pair(static_cast<std::uint32_t>(o.pair));
+    }
+    if (result.earliest) {
+        out->set_has_earliest(true);
+        out->set_earliest(static_cast<std::uint32_t>(*result.earliest));
+    }
+    const auto& s = result.stats;
+    out->set_candidate_pairs(s.candidate_pairs);
+    out->set_elementary_tests(s.elementary_tests);
+    out->set_capped_tests(s.capped_tests);
+    out->set_broad_phase_seconds(s.broad_phase_seconds);
+    out->set_narrow_phase_seconds(s.narrow_phase_seconds);
+    out->set_total_seconds(s.total_seconds);
 }
 
 void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,

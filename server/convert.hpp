@@ -16,6 +16,7 @@
 #include <grpcpp/support/status.h>
 
 #include "config.hpp"
+#include "proxima/ccd/frame_ccd.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
@@ -46,6 +47,9 @@ struct DecodedFrame {
     SceneUpdate update;
     QueryRequest queries;
     bool self_points = false;
+    // Continuous collisions from the positions before this frame to those after it.
+    bool ccd = false;
+    ccd::CcdRequest ccd_request;
 };
 StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame);
 StatusOr<std::vector<NamedMesh>> decode_meshes(
@@ -55,6 +59,7 @@ StatusOr<std::vector<NamedMesh>> decode_meshes(
 // caller knows better. `scene` is the scene the query ran on (for object ids in result order).
 void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
                          const QueryResult& result, bool self_points, v1::FrameResult* out);
+void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out);
 void encode_object(const SceneObject& object, v1::ObjectInfo* out);
 void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
                   std::uint64_t frames, v1::SceneInfo* out);

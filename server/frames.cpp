@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <mutex>
+#include <optional>
 #include <unordered_set>
 #include <utility>
 
@@ -142,6 +143,22 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     if (Status s = validate_update(scene, decoded->update, limits, entry.id); !s.ok()) {
         return s;
     }
+    // CCD interpolates each vertex between its two positions: the primitives must be the same at
+    // both ends, so such a frame may only move vertices.
+    std::optional<Scene> before;
+    if (decoded->ccd) {
+        const auto& u = decoded->update;
+        const char* change = !u.replacements.empty() ? "topology_changes"
+                             : !u.additions.empty()  ? "additions"
+                             : !u.removals.empty()   ? "removals"
+                                                     : nullptr;
+        if (change != nullptr) {
+            return invalid_argument(std::string("queries.ccd: a CCD frame may only move vertices, "
+                                                "but this frame has ") +
+                                    change + " (send those in a frame of their own)");
+        }
+        before = scene;  // the positions at t = 0; topologies are shared, not copied
+    }
     auto changes = scene.apply(std::move(decoded->update));
     if (!changes.ok()) {
         return changes.status();  // the engine's own all-or-nothing check: the scene is unchanged
@@ -160,6 +177,18 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     out->set_scene_id(entry.id);
     out->set_frame(frame.frame());
     encode_frame_result(scene, changes.value(), result.value(), decoded->self_points, out);
+    if (before) {
+        std::vector<std::vector<Vec3>> positions;
+        positions.reserve(scene.size());
+        for (const auto& obj : scene.objects()) {
+            positions.push_back(obj.vertices);
+        }
+        auto ccd = ccd::continuous_collisions(*before, positions, decoded->ccd_request, cancel);
+        if (!ccd.ok()) {
+            return ccd.status();
+        }
+        encode_ccd_result(ccd.value(), out->mutable_ccd());
+    }
     // gRPC would refuse to send it anyway; saying why here gives the client something to act on.
     if (const auto bytes = out->ByteSizeLong(); bytes > limits.max_message_bytes) {
         return {StatusCode::resource_exhausted,

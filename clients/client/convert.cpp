@@ -394,6 +394,10 @@ void encode_frame(const FrameRequest& frame, const std::string& scene_id, bool f
     }
     out->mutable_removals()->Add(u.removals.begin(), u.removals.end());
     encode_query(frame.queries, frame.self_points, out->mutable_queries());
+    if (frame.ccd) {
+        out->mutable_queries()->set_ccd(true);
+        out->mutable_queries()->set_ccd_min_distance(frame.ccd_request.elementary.min_distance);
+    }
 }
 
 StatusOr<FrameRequest> decode_frame(const pb::Frame& frame) {
@@ -436,6 +440,54 @@ StatusOr<FrameRequest> decode_frame(const pb::Frame& frame) {
     }
     out.queries = queries.value();
     out.self_points = frame.queries().self_points();
+    out.ccd = frame.queries().ccd();
+    if (frame.queries().has_ccd_min_distance()) {
+        out.ccd_request.elementary.min_distance = frame.queries().ccd_min_distance();
+    }
+    return out;
+}
+
+StatusOr<ccd::CcdResult> decode_ccd(const pb::CcdResult& in, std::size_t objects) {
+    ccd::CcdResult out;
+    out.pairs.reserve(static_cast<std::size_t>(in.pairs_size()));
+    for (const auto& p : in.pairs()) {
+        if (p.object() >= objects || p.other() >= objects) {
+            return malformed("CCD pair names objects " + std::to_string(p.object()) + " and " +
+                             std::to_string(p.other()) + " of " + std::to_string(objects));
+        }
+        ccd::CcdPair e;
+        e.kind =
+            p.kind() == pb::CCD_EDGE_EDGE ? ccd::CcdKind::edge_edge : ccd::CcdKind::vertex_face;
+        e.object = p.object();
+        e.primitive = p.primitive();
+        e.other = p.other();
+        e.other_primitive = p.other_primitive();
+        e.toi = p.toi();
+        e.capped = p.capped();
+        out.pairs.push_back(e);
+    }
+    for (const auto& o : in.object_pairs()) {
+        if (o.object() >= objects || o.other() >= objects || o.pair() >= out.pairs.size()) {
+            return malformed("CCD object pair (" + std::to_string(o.object()) + ", " +
+                             std::to_string(o.other()) + ") names pair " +
+                             std::to_string(o.pair()) + " of " + std::to_string(out.pairs.size()));
+        }
+        out.object_pairs.push_back({o.object(), o.other(), o.toi(), o.pair()});
+    }
+    if (in.has_earliest()) {
+        if (in.earliest() >= out.pairs.size()) {
+            return malformed("CCD earliest pair " + std::to_string(in.earliest()) + " of " +
+                             std::to_string(out.pairs.size()));
+        }
+        out.earliest = in.earliest();
+    }
+    auto& s = out.stats;
+    s.candidate_pairs = in.candidate_pairs();
+    s.elementary_tests = in.elementary_tests();
+    s.capped_tests = in.capped_tests();
+    s.broad_phase_seconds = in.broad_phase_seconds();
+    s.narrow_phase_seconds = in.narrow_phase_seconds();
+    s.total_seconds = in.total_seconds();
     return out;
 }
 
@@ -515,6 +567,14 @@ StatusOr<FrameResponse> decode_result(const pb::FrameResult& result) {
     }
     if (auto st = decode_pairs(result.pns(), n, "PNS", r.pns); !st.ok()) {
         return st;
+    }
+
+    if (result.has_ccd()) {
+        auto ccd = decode_ccd(result.ccd(), n);
+        if (!ccd.ok()) {
+            return ccd.status();
+        }
+        out.ccd = std::move(ccd).value();
     }
 
     const auto& s = result.stats();

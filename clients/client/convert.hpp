@@ -66,6 +66,8 @@ StatusOr<FrameRequest> decode_frame(const pb::Frame& frame);
 // Checks the result's internal consistency (list sizes against the object count, object indices in
 // range): a malformed result is an internal error, never an out-of-range read later.
 StatusOr<FrameResponse> decode_result(const pb::FrameResult& result);
+// A frame's CCD result; object indices are checked against `objects`.
+StatusOr<ccd::CcdResult> decode_ccd(const pb::CcdResult& in, std::size_t objects);
 // With `self_points` the self entries carry their closest points (6 doubles per triangle).
 void encode_result(const FrameResponse& response, bool self_points, pb::FrameResult* out);
 

@@ -7,9 +7,11 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "proxima/ccd/frame_ccd.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
@@ -62,6 +64,11 @@ struct FrameRequest {
     SceneUpdate update;
     QueryRequest queries;
     bool self_points = false;
+    // Continuous collisions from the positions before this frame to those after it (the frame
+    // may then only move vertices). ccd.elementary.min_distance is sent; the other CcdRequest
+    // fields are the daemon's defaults.
+    bool ccd = false;
+    ccd::CcdRequest ccd_request;
 };
 
 struct FrameResponse {
@@ -71,6 +78,7 @@ struct FrameResponse {
     std::vector<ObjectId> added_ids;                  // this frame's additions
     std::vector<std::vector<ObjectId>> fragment_ids;  // per topology change
     QueryResult result;                               // object indices in result order
+    std::optional<ccd::CcdResult> ccd;                // when the frame asked for it
     double server_seconds = 0;
 };
 
