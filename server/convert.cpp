@@ -233,6 +233,8 @@ StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
     }
     out.self_points = q.self_points();
     out.ccd = q.ccd();
+    out.penetration = q.penetration();
+    out.queries.collisions = out.queries.collisions || out.penetration;
     if (q.has_ccd_min_distance()) {
         if (!std::isfinite(q.ccd_min_distance()) || q.ccd_min_distance() < 0.0) {
             return invalid_argument(
@@ -242,6 +244,22 @@ StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
         out.ccd_request.elementary.min_distance = q.ccd_min_distance();
     }
     return out;
+}
+
+void encode_penetration(const Penetration& p, v1::Penetration* out) {
+    out->set_object(p.object);
+    out->set_other(p.other);
+    encode_vec3(p.direction, out->mutable_direction());
+    out->set_depth(p.depth);
+    encode_vec3(p.vector, out->mutable_vector());
+    out->mutable_triangles()->Add(p.triangles.begin(), p.triangles.end());
+    out->mutable_other_triangles()->Add(p.other_triangles.begin(), p.other_triangles.end());
+    out->set_triangle(p.triangle);
+    out->set_other_triangle(p.other_triangle);
+    out->set_isolated(p.isolated);
+    out->set_closed(p.closed);
+    out->set_normal_fallback(p.normal_fallback);
+    out->set_sides_split(p.sides_split);
 }
 
 void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out) {

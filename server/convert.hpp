@@ -17,6 +17,7 @@
 
 #include "config.hpp"
 #include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
@@ -50,6 +51,8 @@ struct DecodedFrame {
     // Continuous collisions from the positions before this frame to those after it.
     bool ccd = false;
     ccd::CcdRequest ccd_request;
+    // Local penetration vectors (the collisions query runs too).
+    bool penetration = false;
 };
 StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame);
 StatusOr<std::vector<NamedMesh>> decode_meshes(
@@ -60,6 +63,7 @@ StatusOr<std::vector<NamedMesh>> decode_meshes(
 void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
                          const QueryResult& result, bool self_points, v1::FrameResult* out);
 void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out);
+void encode_penetration(const Penetration& p, v1::Penetration* out);
 void encode_object(const SceneObject& object, v1::ObjectInfo* out);
 void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
                   std::uint64_t frames, v1::SceneInfo* out);

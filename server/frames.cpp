@@ -177,6 +177,15 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     out->set_scene_id(entry.id);
     out->set_frame(frame.frame());
     encode_frame_result(scene, changes.value(), result.value(), decoded->self_points, out);
+    if (decoded->penetration) {
+        auto penetrations = penetration_depths(scene, result->collisions, cancel);
+        if (!penetrations.ok()) {
+            return penetrations.status();
+        }
+        for (const auto& p : penetrations.value()) {
+            encode_penetration(p, out->add_penetrations());
+        }
+    }
     if (before) {
         std::vector<std::vector<Vec3>> positions;
         positions.reserve(scene.size());

@@ -53,12 +53,19 @@ struct DistanceArgs {
     bool pns = false;
     bool json = false;
     double tolerance = -1.0;
+    bool penetration = false;
     std::string culler = "auto";
     std::vector<std::string> files;
 };
 
+// A distance run's answers: the query result and, with --penetration, the penetration vectors.
+struct DistanceAnswer {
+    QueryResult result;
+    std::vector<Penetration> penetrations;
+};
+
 void print_text(const std::vector<client::InputObject>& objects, const QueryResult& r,
-                const DistanceArgs& args) {
+                const std::vector<Penetration>& penetrations, const DistanceArgs& args) {
     for (std::size_t i = 0; i < objects.size(); ++i) {
         const auto& s = r.separation[i];
         if (s.other == NO_OBJECT) {
@@ -88,14 +95,21 @@ void print_text(const std::vector<client::InputObject>& objects, const QueryResu
         std::printf("tolerance %.9g: %zu triangle pairs within\n", args.tolerance,
                     r.tolerance.size());
     }
+    for (const auto& p : penetrations) {
+        std::printf("penetration %s - %s: depth %.9g along (%.6g, %.6g, %.6g)%s%s\n",
+                    objects[p.object].mesh.name.c_str(), objects[p.other].mesh.name.c_str(),
+                    p.depth, p.direction.x, p.direction.y, p.direction.z,
+                    p.isolated ? "" : ", not isolated (several contact regions)",
+                    p.closed ? "" : ", open surface (intersecting triangles only)");
+    }
     std::printf("culler %s, %llu exact tests (brute force: %llu), %.3f ms\n",
                 r.stats.culler.c_str(), static_cast<unsigned long long>(r.stats.exact_tests),
                 static_cast<unsigned long long>(r.stats.brute_force_tests),
                 r.stats.total_seconds * 1e3);
 }
 
-StatusOr<QueryResult> query_local(const std::vector<client::InputObject>& objects,
-                                  const QueryRequest& request) {
+StatusOr<DistanceAnswer> query_local(const std::vector<client::InputObject>& objects,
+                                     const QueryRequest& request, bool penetration) {
     ProximityEngine engine;
     SceneUpdate update;
     for (const auto& obj : objects) {
@@ -104,7 +118,19 @@ StatusOr<QueryResult> query_local(const std::vector<client::InputObject>& object
     if (auto applied = engine.scene().apply(std::move(update)); !applied.ok()) {
         return applied.status();
     }
-    return engine.query(request);
+    auto result = engine.query(request);
+    if (!result.ok()) {
+        return result.status();
+    }
+    DistanceAnswer answer{std::move(result).value(), {}};
+    if (penetration) {
+        auto p = penetration_depths(engine.scene(), answer.result.collisions);
+        if (!p.ok()) {
+            return p.status();
+        }
+        answer.penetrations = std::move(p).value();
+    }
+    return answer;
 }
 
 // The printers index file triangle maps with the result's indices: a daemon answering with indices
@@ -159,9 +185,9 @@ Status check_remote_result(const std::vector<client::InputObject>& objects,
 
 // Creates a scene on the daemon with the objects in input order, runs one Query and deletes the
 // scene: the daemon's scene order is the input order, so result indices mean the same as locally.
-StatusOr<QueryResult> query_remote(const DistanceArgs& args,
-                                   const std::vector<client::InputObject>& objects,
-                                   const QueryRequest& request) {
+StatusOr<DistanceAnswer> query_remote(const DistanceArgs& args,
+                                      const std::vector<client::InputObject>& objects,
+                                      const QueryRequest& request) {
     auto remote = connect(args.server, args.inline_mesh_bytes);
     if (!remote.ok()) {
         return remote.status();
@@ -178,6 +204,7 @@ StatusOr<QueryResult> query_remote(const DistanceArgs& args,
     }
     client::FrameRequest frame;
     frame.queries = request;
+    frame.penetration = args.penetration;
     auto response = c.query(scene->scene_id, frame);
     if (auto deleted = c.delete_scene(scene->scene_id); !deleted.ok()) {
         // The answer is still good; the stale scene is the daemon operator's to notice.
@@ -190,7 +217,24 @@ StatusOr<QueryResult> query_remote(const DistanceArgs& args,
     if (auto st = check_remote_result(objects, response.value(), request); !st.ok()) {
         return st;
     }
-    return std::move(response->result);
+    for (const auto& p : response->penetrations) {
+        auto in_range = [&](std::uint32_t object, std::uint32_t t) {
+            return object < objects.size() && t < objects[object].file_triangle.size();
+        };
+        bool ok = in_range(p.object, p.triangle) && in_range(p.other, p.other_triangle);
+        for (auto t : p.triangles) {
+            ok = ok && in_range(p.object, t);
+        }
+        for (auto t : p.other_triangles) {
+            ok = ok && in_range(p.other, t);
+        }
+        if (!ok) {
+            return Status(StatusCode::internal,
+                          "the daemon's answer is malformed: a penetration names a triangle that "
+                          "does not exist");
+        }
+    }
+    return DistanceAnswer{std::move(response->result), std::move(response->penetrations)};
 }
 
 int run_distance(const DistanceArgs& args) {
@@ -204,22 +248,27 @@ int run_distance(const DistanceArgs& args) {
     }
     QueryRequest request;
     request.self = args.self;
-    request.collisions = args.collisions;
+    request.collisions = args.collisions || args.penetration;
     request.pns = args.pns;
     request.culler = culler.value();
     if (args.tolerance >= 0.0) {
         request.tolerance = args.tolerance;
     }
-    auto result = args.server.empty() ? query_local(objects.value(), request)
+    auto answer = args.server.empty() ? query_local(objects.value(), request, args.penetration)
                                       : query_remote(args, objects.value(), request);
-    if (!result.ok()) {
-        return fail(result.status());
+    if (!answer.ok()) {
+        return fail(answer.status());
     }
+    const auto& result = answer->result;
     if (args.json) {
-        client::OutputOptions opts{args.self, args.collisions, args.tolerance >= 0.0, args.pns};
-        std::cout << client::distance_json(objects.value(), result.value(), opts).dump() << '\n';
+        client::OutputOptions opts{args.self, request.collisions, args.tolerance >= 0.0, args.pns};
+        auto j = client::distance_json(objects.value(), result, opts);
+        if (args.penetration) {
+            j["penetrations"] = client::penetrations_json(objects.value(), answer->penetrations);
+        }
+        std::cout << j.dump() << '\n';
     } else {
-        print_text(objects.value(), result.value(), args);
+        print_text(objects.value(), result, answer->penetrations, args);
     }
     return 0;
 }
@@ -562,6 +611,9 @@ int main(int argc, char** argv) {
             ->add_option("--tolerance", dist.tolerance,
                          "Also: every triangle pair within this distance")
             ->check(CLI::NonNegativeNumber);
+        distance->add_flag("--penetration", dist.penetration,
+                           "Also: a local penetration vector per intersecting object pair "
+                           "(implies --collisions)");
         distance->add_flag("--pns", dist.pns,
                            "Also: the culler's candidate pairs for the tolerance (or contact)");
         distance->add_option("--culler", dist.culler, "auto, brute or bvh")

@@ -394,6 +394,7 @@ void encode_frame(const FrameRequest& frame, const std::string& scene_id, bool f
     }
     out->mutable_removals()->Add(u.removals.begin(), u.removals.end());
     encode_query(frame.queries, frame.self_points, out->mutable_queries());
+    out->mutable_queries()->set_penetration(frame.penetration);
     if (frame.ccd) {
         out->mutable_queries()->set_ccd(true);
         out->mutable_queries()->set_ccd_min_distance(frame.ccd_request.elementary.min_distance);
@@ -441,6 +442,7 @@ StatusOr<FrameRequest> decode_frame(const pb::Frame& frame) {
     out.queries = queries.value();
     out.self_points = frame.queries().self_points();
     out.ccd = frame.queries().ccd();
+    out.penetration = frame.queries().penetration();
     if (frame.queries().has_ccd_min_distance()) {
         out.ccd_request.elementary.min_distance = frame.queries().ccd_min_distance();
     }
@@ -569,6 +571,27 @@ StatusOr<FrameResponse> decode_result(const pb::FrameResult& result) {
         return st;
     }
 
+    for (const auto& p : result.penetrations()) {
+        if (p.object() >= n || p.other() >= n) {
+            return malformed("penetration names objects " + std::to_string(p.object()) + " and " +
+                             std::to_string(p.other()) + " of " + std::to_string(n));
+        }
+        Penetration e;
+        e.object = p.object();
+        e.other = p.other();
+        e.direction = decode_vec3(p.direction());
+        e.depth = p.depth();
+        e.vector = decode_vec3(p.vector());
+        e.triangles.assign(p.triangles().begin(), p.triangles().end());
+        e.other_triangles.assign(p.other_triangles().begin(), p.other_triangles().end());
+        e.triangle = p.triangle();
+        e.other_triangle = p.other_triangle();
+        e.isolated = p.isolated();
+        e.closed = p.closed();
+        e.normal_fallback = p.normal_fallback();
+        e.sides_split = p.sides_split();
+        out.penetrations.push_back(std::move(e));
+    }
     if (result.has_ccd()) {
         auto ccd = decode_ccd(result.ccd(), n);
         if (!ccd.ok()) {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
@@ -69,6 +70,8 @@ struct FrameRequest {
     // fields are the daemon's defaults.
     bool ccd = false;
     ccd::CcdRequest ccd_request;
+    // Local penetration vectors of intersecting objects (collisions are returned too).
+    bool penetration = false;
 };
 
 struct FrameResponse {
@@ -79,6 +82,7 @@ struct FrameResponse {
     std::vector<std::vector<ObjectId>> fragment_ids;  // per topology change
     QueryResult result;                               // object indices in result order
     std::optional<ccd::CcdResult> ccd;                // when the frame asked for it
+    std::vector<Penetration> penetrations;            // when the frame asked for them
     double server_seconds = 0;
 };
 

@@ -115,4 +115,36 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
     return out;
 }
 
+nlohmann::json penetrations_json(const std::vector<InputObject>& objects,
+                                 const std::vector<Penetration>& penetrations) {
+    auto out = nlohmann::json::array();
+    auto vec = [](const Vec3& v) { return nlohmann::json::array({v.x, v.y, v.z}); };
+    for (const auto& p : penetrations) {
+        const auto& a = objects[p.object].file_triangle;
+        const auto& b = objects[p.other].file_triangle;
+        auto ids = [](const std::vector<std::uint32_t>& map,
+                      const std::vector<std::uint32_t>& triangles) {
+            auto list = nlohmann::json::array();
+            for (auto t : triangles) {
+                list.push_back(map[t]);
+            }
+            return list;
+        };
+        out.push_back({{"object", p.object},
+                       {"other", p.other},
+                       {"depth", p.depth},
+                       {"direction", vec(p.direction)},
+                       {"vector", vec(p.vector)},
+                       {"triangles", ids(a, p.triangles)},
+                       {"other_triangles", ids(b, p.other_triangles)},
+                       {"triangle", a[p.triangle]},
+                       {"other_triangle", b[p.other_triangle]},
+                       {"isolated", p.isolated},
+                       {"closed", p.closed},
+                       {"normal_fallback", p.normal_fallback},
+                       {"sides_split", p.sides_split}});
+    }
+    return out;
+}
+
 }  // namespace proxima::client

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/local_scene.hpp"
+#include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 
 namespace proxima::client {
@@ -23,5 +24,11 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
                              const OutputOptions& options);
 
 nlohmann::json stats_json(const QueryStats& stats);
+
+// [{"object", "other", "depth", "direction": [x, y, z], "vector": [...], "triangles": [...],
+//   "other_triangles": [...], "triangle", "other_triangle", "isolated", "closed",
+//   "normal_fallback", "sides_split"}]; triangle ids are indices in the objects' input files.
+nlohmann::json penetrations_json(const std::vector<InputObject>& objects,
+                                 const std::vector<Penetration>& penetrations);
 
 }  // namespace proxima::client

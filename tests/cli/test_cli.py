@@ -129,6 +129,22 @@ class Cli(unittest.TestCase):
             self.assertEqual(set(p), {"object", "triangle", "other", "other_triangle"})
         self.assertEqual(doc["objects"][0]["separation"]["distance"], 0.0)
 
+    def test_penetration_of_overlapping_boxes(self):
+        # b overlaps a by 0.3 along x: the local penetration vector is (-0.3, 0, 0) for a.
+        c = os.path.join(self.tmp, "over.off")
+        write_off(c, [box_off((0.7, 0.2, 0.2), (1.7, 0.8, 0.8))])
+        doc = self.distance("--penetration", self.a, c)
+        self.assertGreater(len(doc["collisions"]), 0)  # --penetration implies --collisions
+        self.assertEqual(len(doc["penetrations"]), 1)
+        p = doc["penetrations"][0]
+        self.assertEqual((p["object"], p["other"]), (0, 1))
+        self.assertAlmostEqual(p["depth"], 0.3, places=9)
+        for got, want in zip(p["direction"], (-1.0, 0.0, 0.0)):
+            self.assertAlmostEqual(got, want, places=9)
+        self.assertTrue(p["isolated"])
+        self.assertTrue(p["closed"])
+        self.assertEqual(self.distance("--penetration", self.a, self.b)["penetrations"], [])
+
     def test_cullers_agree(self):
         args = ["--self", "--collisions", "--tolerance", "0.3", "--split-components", self.two,
                 self.a, self.b]

@@ -174,6 +174,9 @@ class ServerCli(unittest.TestCase):
         self.assertEqual(doc["objects"][0]["separation"]["distance"], 0.0)
         doc = self.assert_same_as_local("--collisions", "--tolerance", "0.1", "a", "crossing")
         self.assertGreater(len(doc["collisions"]), 0)
+        doc = self.assert_same_as_local("--penetration", "a", "crossing")
+        self.assertEqual(len(doc["penetrations"]), 1)
+        self.assertGreater(doc["penetrations"][0]["depth"], 0.0)
         self.assert_same_as_local("a")  # alone: no other object, nulls
 
     def test_distance_components_self_collisions_tolerance(self):
