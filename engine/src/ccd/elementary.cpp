@@ -1,0 +1,423 @@
+// Elementary CCD tests (vertex-face, edge-edge): inclusion-based root finding over the
+// (t, u, v) domain, earliest time first, with a rigorous bound on floating-point rounding.
+//
+// The problem. Every point moves linearly, x(t) = (1 - t) x_t0 + t x_t1, t in [0, 1].
+//   vertex_face: F(t, u, v) = p(t) - a(t) - u (b(t) - a(t)) - v (c(t) - a(t)),
+//                u, v >= 0, u + v <= 1   (the point of the triangle a + u (b - a) + v (c - a))
+//   edge_edge:   F(t, u, v) = a0(t) + u (a1(t) - a0(t)) - b0(t) - v (b1(t) - b0(t)),
+//                u, v in [0, 1]
+// The primitives touch (come within distance d) at time t iff F(t, u, v) = 0 (|F| <= d) for some
+// (u, v) in the domain. Each coordinate F_k is multilinear in (t, u, v) (no t^2, u^2, v^2 or u v
+// term), so over a region B = [t0,t1]x[u0,u1]x[v0,v1] it lies between the minimum and maximum of
+// its values at B's 8 corners.
+//
+// The solver. Regions wait in a queue grouped by t0: the group with the smallest t0 is served
+// first, last in first out within a group (depth first among regions that start at the same
+// time). A region is examined by computing F at its 8 corners; with e_k the rounding bound below,
+// it is excluded when for some axis k the interval [min_k - e_k, max_k + e_k] misses [-d, d]: then
+// no point of B has |F_k| <= d, exactly. A region of the vertex-face domain with u0 + v0 > 1 lies
+// outside the triangle and is dropped (u0, v0 are dyadic bisection points, so the sum is exact).
+// A surviving region is accepted as a contact when on every axis [min_k, max_k] lies within
+// [-(d + tol + e_k), d + tol + e_k] (every point of it is within d + tol + 2 e_k of touching on
+// every axis), or when no side of it may be split any more (all widths at the 2^-50 floor).
+// Otherwise it is bisected along the parameter most likely to let a half be excluded: for each
+// axis not yet within the tolerance, the slack is how far its range reaches past the far end of
+// [-d - e, d + e] (a half is excluded once a split removes more than that from one side), and
+// the score of t, u or v is the largest ratio of its contribution to the axis' range (the largest
+// corner difference along it) to that slack. Splitting by raw contribution instead makes
+// degenerate queries (parallel or collinear edges, a triangle collapsed to a segment, where the
+// contacts form a curve) refine the whole curve before time advances: tens of thousands of
+// regions where this rule needs about a hundred. Both halves are examined when created; the
+// survivors are queued.
+// Earliest time: the region served always has the smallest t0 of all queued regions, and the
+// region holding the true earliest contact (t*, u*, v*) is never excluded, so when an accepted
+// region is served its t0 <= t*: reporting toi = t0 is never late. When `max_boxes` regions have
+// been examined the test stops and reports a contact at the t0 of the region being refined (no
+// later than any region not yet excluded), flagged `capped`. Every examined region costs the same
+// bounded work (8 corners), so the work per test is bounded by max_boxes.
+//
+// Rounding (u = 2^-53, the unit roundoff; all t, u, v are dyadic in [0, 1] with at most 50
+// fractional bits, so 1 - t is exact). Per axis k let M be the largest |coordinate| of the 8
+// input points on that axis. The solver precomputes, at both frames, the three differences
+//   vertex_face: g0 = p - a, gu = b - a, gv = c - a;   edge_edge: g0 = a0 - b0, gu = a0 - a1,
+//   gv = b1 - b0    (so that F = g0(t) - u gu(t) - v gv(t) in both cases)
+// and at a corner computes
+//   g(t) = fl(fl((1 - t) G_t0) + fl(t G_t1))  for each of g0, gu, gv, then
+//   F = fl(fl(g0 - fl(u gu)) - fl(v gv)).
+// Error of each step against the same formula in exact arithmetic on the double inputs
+// (first order in u; the O(u^2 M) terms are a few hundred u^2 M, far inside the slack below):
+//   G = fl(x - y):                  |x - y| <= 2M,          error <= 2uM
+//   g(t):  inputs 2uM ((1-t) + t = 1), products u(1-t)|G_t0| + u t|G_t1| <= 2uM,
+//          sum u |g| <= 2uM                                   error <= 6uM,  |g| <= 2M
+//   fl(u gu): 6uM + u 2M                                      error <= 8uM,  |.| <= 2M
+//   h = fl(g0 - u gu): 6uM + 8uM + u 4M                       error <= 18uM, |h| <= 4M
+//   F = fl(h - v gv): 18uM + 8uM + u 6M                       error <= 32uM
+// (with a fused multiply-add the compiler only removes roundings, so the bound still holds).
+// Input rounding: the exact inputs (e.g. rationals) differ from the doubles by at most 1 ulp
+// <= 2uM each; F is a linear combination of the 8 input points with weights whose absolute values
+// sum to 1 + |1 - u - v| + u + v <= 4 (vf; corners may have u + v up to 2) or
+// |1 - u| + u + |1 - v| + v = 2 (ee), so this adds at most 8uM. In all
+//   |computed F_k - exact F_k| <= 40 u M < e_k := 64 u M + 2^-1060 = M 2^-47 + 2^-1060,
+// where the absolute term covers underflow (each operation adds at most 2^-1075 absolutely when its
+// result is subnormal, inputs are within 2^-1074; a few dozen such terms stay below 2^-1068).
+// Overflow is excluded by scaling: an axis with M > 2^1000 is multiplied by 2^-64 (exact except
+// for values that become subnormal, whose error is covered by the absolute term) together with
+// d (rounded up) and tol. The exclusion tests compare fl(max + e) < -d and fl(min - e) > d:
+// rounding to nearest is monotone and -d, d are doubles, so each holds only if it holds exactly.
+// tests/unit/test_ccd_elementary.cpp checks the bound against exact GMP evaluation.
+//
+// The inclusion test uses |F_k| <= d on each axis (a box around the sphere of radius d), so with
+// d > 0 contacts up to sqrt(3) d apart may be reported: conservative, never a miss.
+
+#include "proxima/ccd/elementary.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace proxima::ccd {
+
+namespace {
+
+constexpr double ERROR_SCALE = 0x1p-47;       // 64 u
+constexpr double ERROR_ABSOLUTE = 0x1p-1060;  // underflow
+constexpr double HUGE_COORDINATE = 0x1p1000;  // axes beyond this are scaled by 2^-64
+constexpr double HUGE_SCALE = 0x1p-64;
+constexpr double MIN_WIDTH = 0x1p-50;  // no side of a region is bisected below this width
+
+// One test, with the coordinates arranged per axis.
+struct Problem {
+    bool vertex_face = true;
+    // g[k][q][end]: q = 0: g0, 1: gu, 2: gv; end 0: at t = 0, 1: at t = 1.
+    double g[3][3][2] = {};
+    double error[3] = {};   // e_k
+    double reject[3] = {};  // d_k: exclusion threshold
+    double accept[3] = {};  // d_k + tol_k + e_k: acceptance threshold
+    bool valid = false;
+};
+
+struct Region {
+    double t0, t1, u0, u1, v0, v1;
+    std::uint32_t depth;
+    std::uint8_t split;  // 0: t, 1: u, 2: v, 3: accepted
+};
+
+// Regions waiting to be refined, grouped by t0. The group with the smallest t0 is served first,
+// last in first out within a group (depth first among regions that start at the same time).
+class RegionQueue {
+  public:
+    bool empty() const { return m_active == 0; }
+
+    void clear() {
+        for (std::size_t i = 0; i < m_active; ++i) {
+            m_groups[i].regions.clear();
+        }
+        m_active = 0;
+    }
+
+    void push(const Region& r) {
+        // m_groups[0, m_active) are sorted by decreasing t0: the last has the smallest.
+        std::size_t i = m_active;
+        while (i > 0 && m_groups[i - 1].t0 < r.t0) {
+            --i;
+        }
+        if (i > 0 && m_groups[i - 1].t0 == r.t0) {
+            m_groups[i - 1].regions.push_back(r);
+            return;
+        }
+        if (m_active == m_groups.size()) {
+            m_groups.emplace_back();
+        }
+        // The spare (empty) group at m_active moves to position i.
+        for (std::size_t j = m_active; j > i; --j) {
+            std::swap(m_groups[j], m_groups[j - 1]);
+        }
+        m_groups[i].t0 = r.t0;
+        m_groups[i].regions.push_back(r);
+        ++m_active;
+    }
+
+    Region pop() {
+        auto& group = m_groups[m_active - 1];
+        const Region r = group.regions.back();
+        group.regions.pop_back();
+        if (group.regions.empty()) {
+            --m_active;
+        }
+        return r;
+    }
+
+  private:
+    struct Group {
+        double t0 = 0.0;
+        std::vector<Region> regions;
+    };
+    std::vector<Group> m_groups;
+    std::size_t m_active = 0;
+};
+
+// Multiply by 2^-64 rounding up (for the distance threshold of a scaled axis).
+double scale_up(double x) {
+    const double s = x * HUGE_SCALE;
+    return s * 0x1p64 < x ? std::nextafter(s, std::numeric_limits<double>::infinity()) : s;
+}
+
+Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol) {
+    Problem pr;
+    pr.vertex_face = kind == CcdKind::vertex_face;
+    // Differences (x - y) of point indices within one frame: g0, gu, gv.
+    static constexpr int VF[3][2] = {{0, 1}, {2, 1}, {3, 1}};
+    static constexpr int EE[3][2] = {{0, 2}, {0, 1}, {3, 2}};
+    const auto& pairs = pr.vertex_face ? VF : EE;
+    for (int k = 0; k < 3; ++k) {
+        double m = 0.0;
+        for (const auto& p : points) {
+            const double c = p[k];
+            if (!std::isfinite(c)) {
+                return pr;  // invalid
+            }
+            m = std::max(m, std::abs(c));
+        }
+        double scale = 1.0;
+        double dk = d;
+        double tk = tol;
+        if (m > HUGE_COORDINATE) {
+            scale = HUGE_SCALE;
+            m *= HUGE_SCALE;
+            dk = scale_up(d);
+            tk = tol * HUGE_SCALE;
+        }
+        for (int q = 0; q < 3; ++q) {
+            for (int end = 0; end < 2; ++end) {
+                const double x = points[static_cast<std::size_t>(pairs[q][0] + 4 * end)][k];
+                const double y = points[static_cast<std::size_t>(pairs[q][1] + 4 * end)][k];
+                pr.g[k][q][end] = x * scale - y * scale;
+            }
+        }
+        pr.error[k] = m * ERROR_SCALE + ERROR_ABSOLUTE;
+        pr.reject[k] = dk;
+        pr.accept[k] = dk + tk + pr.error[k];
+    }
+    pr.valid = true;
+    return pr;
+}
+
+// F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
+inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
+                    double f[3][8]) {
+    for (int ti = 0; ti < 2; ++ti) {
+        const double tt = t[ti];
+        const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
+        for (int k = 0; k < 3; ++k) {
+            const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
+            const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
+            const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
+            for (int ui = 0; ui < 2; ++ui) {
+                const double h = g0 - u[ui] * gu;
+                f[k][4 * ti + 2 * ui + 0] = h - v[0] * gv;
+                f[k][4 * ti + 2 * ui + 1] = h - v[1] * gv;
+            }
+        }
+    }
+}
+
+// Examines r: false when it is excluded; otherwise sets r.split (3 when accepted).
+inline bool examine(const Problem& pr, Region& r) {
+    const double t[2] = {r.t0, r.t1};
+    const double u[2] = {r.u0, r.u1};
+    const double v[2] = {r.v0, r.v1};
+    double f[3][8];
+    corners(pr, t, u, v, f);
+    bool accepted = true;
+    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
+    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
+    double dt = 0.0;
+    double du = 0.0;
+    double dv = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double* fk = f[k];
+        double lo = fk[0];
+        double hi = fk[0];
+        for (int c = 1; c < 8; ++c) {
+            lo = std::min(lo, fk[c]);
+            hi = std::max(hi, fk[c]);
+        }
+        // Rounding is monotone and the thresholds are doubles: see the file comment.
+        if (hi + pr.error[k] < -pr.reject[k] || lo - pr.error[k] > pr.reject[k]) {
+            return false;
+        }
+        if (hi <= pr.accept[k] && lo >= -pr.accept[k]) {
+            continue;  // this axis is within the tolerance
+        }
+        accepted = false;
+        const double window = pr.reject[k] + pr.error[k];
+        const double inv_slack = 1.0 / (std::min(hi + window, window - lo) + pr.error[k]);
+        double ct = 0.0;
+        double cu = 0.0;
+        double cv = 0.0;
+        for (int c = 0; c < 4; ++c) {
+            ct = std::max(ct, std::abs(fk[c + 4] - fk[c]));
+        }
+        for (int c : {0, 1, 4, 5}) {
+            cu = std::max(cu, std::abs(fk[c + 2] - fk[c]));
+        }
+        for (int c : {0, 2, 4, 6}) {
+            cv = std::max(cv, std::abs(fk[c + 1] - fk[c]));
+        }
+        dt = std::max(dt, ct * inv_slack);
+        du = std::max(du, cu * inv_slack);
+        dv = std::max(dv, cv * inv_slack);
+    }
+    if (accepted) {
+        r.split = 3;
+        return true;
+    }
+    // Bisect the parameter most likely to exclude a half (the largest score), among those still
+    // wider than the floor; a region that may not be split any more is accepted.
+    if (r.t1 - r.t0 <= MIN_WIDTH) {
+        dt = -1.0;
+    }
+    if (r.u1 - r.u0 <= MIN_WIDTH) {
+        du = -1.0;
+    }
+    if (r.v1 - r.v0 <= MIN_WIDTH) {
+        dv = -1.0;
+    }
+    if (dt < 0.0 && du < 0.0 && dv < 0.0) {
+        r.split = 3;
+    } else if (dt >= du && dt >= dv) {
+        r.split = 0;
+    } else if (du >= dv) {
+        r.split = 1;
+    } else {
+        r.split = 2;
+    }
+    return true;
+}
+
+ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
+    ElementaryResult result;
+    double d = options.min_distance;
+    if (std::isnan(d)) {
+        result.hit = result.capped = true;
+        result.toi = 0.0;
+        return result;
+    }
+    d = std::max(d, 0.0);
+    double tol = options.tolerance;
+    if (!(tol > 0.0)) {
+        tol = 0.0;  // NaN or <= 0: refine to the width floor
+    }
+    const Problem pr = make_problem(kind, points, d, tol);
+    if (!pr.valid) {
+        // Non-finite coordinates: nothing can be excluded.
+        result.hit = result.capped = true;
+        result.toi = 0.0;
+        return result;
+    }
+    const std::uint32_t cap = options.max_boxes;
+    if (cap == 0) {
+        result.hit = result.capped = true;
+        result.toi = 0.0;
+        return result;
+    }
+    Region root{0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0, 0};
+    result.boxes = 1;
+    if (!examine(pr, root)) {
+        return result;
+    }
+    thread_local RegionQueue queue;
+    queue.clear();
+    queue.push(root);
+    while (!queue.empty()) {
+        const Region r = queue.pop();
+        if (r.split == 3) {
+            result.hit = true;
+            result.toi = r.t0;
+            return result;
+        }
+        Region halves[2] = {r, r};
+        halves[0].depth = halves[1].depth = r.depth + 1;
+        if (r.split == 0) {
+            halves[0].t1 = halves[1].t0 = 0.5 * (r.t0 + r.t1);
+        } else if (r.split == 1) {
+            halves[0].u1 = halves[1].u0 = 0.5 * (r.u0 + r.u1);
+        } else {
+            halves[0].v1 = halves[1].v0 = 0.5 * (r.v0 + r.v1);
+        }
+        // The upper half first, so that the lower one is served first among equal t0.
+        for (int i = 1; i >= 0; --i) {
+            Region& h = halves[i];
+            if (pr.vertex_face && h.u0 + h.v0 > 1.0) {
+                continue;  // outside the triangle (exact: dyadic)
+            }
+            if (result.boxes >= cap) {
+                // Every region not excluded has t0 >= r.t0.
+                result.hit = result.capped = true;
+                result.toi = r.t0;
+                queue.clear();
+                return result;
+            }
+            ++result.boxes;
+            if (examine(pr, h)) {
+                queue.push(h);
+            }
+        }
+    }
+    queue.clear();
+    return result;
+}
+
+}  // namespace
+
+const char* ccd_kind_name(CcdKind kind) {
+    return kind == CcdKind::vertex_face ? "vf" : "ee";
+}
+
+ElementaryResult vertex_face(const CcdPoints& points, const ElementaryOptions& options) {
+    return solve(CcdKind::vertex_face, points, options);
+}
+
+ElementaryResult edge_edge(const CcdPoints& points, const ElementaryOptions& options) {
+    return solve(CcdKind::edge_edge, points, options);
+}
+
+ElementaryResult elementary(CcdKind kind, const CcdPoints& points,
+                            const ElementaryOptions& options) {
+    return solve(kind, points, options);
+}
+
+CcdCornerValues elementary_corner_values(CcdKind kind, const CcdPoints& points,
+                                         const CcdRegion& region) {
+    CcdCornerValues out;
+    for (double x : region) {
+        if (!(x >= 0.0 && x <= 1.0) || std::ldexp(x, 52) != std::floor(std::ldexp(x, 52))) {
+            return out;
+        }
+    }
+    for (const auto& p : points) {
+        for (int k = 0; k < 3; ++k) {
+            if (!std::isfinite(p[k]) || std::abs(p[k]) > HUGE_COORDINATE) {
+                return out;
+            }
+        }
+    }
+    const Problem pr = make_problem(kind, points, 0.0, 0.0);
+    const double t[2] = {region[0], region[1]};
+    const double u[2] = {region[2], region[3]};
+    const double v[2] = {region[4], region[5]};
+    double f[3][8];
+    corners(pr, t, u, v, f);
+    for (int k = 0; k < 3; ++k) {
+        for (int c = 0; c < 8; ++c) {
+            out.values[static_cast<std::size_t>(k)][static_cast<std::size_t>(c)] = f[k][c];
+        }
+        out.error_bound[static_cast<std::size_t>(k)] = pr.error[k];
+    }
+    out.valid = true;
+    return out;
+}
+
+}  // namespace proxima::ccd

@@ -1,0 +1,563 @@
+// Elementary CCD tests (proxima/ccd/elementary.hpp): known answers (a vertex through a triangle,
+// parallel and crossing edges, contact at t = 0 and t = 1, degenerate triangles and edges, motion
+// in the triangle's plane, minimum distance, the work cap, bad input), random queries built with an
+// exact contact (hit, and a time of impact no later than the contact), the rounding-error bound
+// against exact GMP evaluation on rational inputs, and the acceptance test: every query of the
+// public CCD benchmark (PROXIMA_DATA_DIR/ccd-queries) with zero false negatives.
+
+#include <gmp.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "proxima/ccd/elementary.hpp"
+#include "proxima/io/ccd_queries.hpp"
+
+namespace proxima::ccd {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr CcdKind VF = CcdKind::vertex_face;
+constexpr CcdKind EE = CcdKind::edge_edge;
+
+// Static points: the same position at t = 0 and t = 1.
+CcdPoints moving(const std::array<Vec3, 4>& t0, const std::array<Vec3, 4>& t1) {
+    return {t0[0], t0[1], t0[2], t0[3], t1[0], t1[1], t1[2], t1[3]};
+}
+
+const std::array<Vec3, 4> TRIANGLE_Z0 = {Vec3{}, Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0, 1, 0}};
+
+CcdPoints vertex_and_static_triangle(const Vec3& p0, const Vec3& p1) {
+    return {p0, TRIANGLE_Z0[1], TRIANGLE_Z0[2], TRIANGLE_Z0[3],
+            p1, TRIANGLE_Z0[1], TRIANGLE_Z0[2], TRIANGLE_Z0[3]};
+}
+
+TEST(CcdElementary, VertexThroughTriangleAtHalf) {
+    const auto pts = vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0});
+    const auto r = vertex_face(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_FALSE(r.capped);
+    // Never late; within the tolerance in time (|F_z| = |1 - 2t| <= tol + 2e at t0).
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-6);
+    EXPECT_EQ(elementary(VF, pts).toi, r.toi);
+}
+
+TEST(CcdElementary, VertexMissesTriangle) {
+    // Through the plane outside the triangle (beyond the hypotenuse), and parallel above it.
+    EXPECT_FALSE(vertex_face(vertex_and_static_triangle({0.6, 0.6, 1.0}, {0.6, 0.6, -1.0})).hit);
+    EXPECT_FALSE(vertex_face(vertex_and_static_triangle({0.2, 0.2, 0.5}, {0.3, 0.2, 0.5})).hit);
+    // Moving away.
+    EXPECT_FALSE(vertex_face(vertex_and_static_triangle({0.2, 0.2, 0.1}, {0.2, 0.2, 2.0})).hit);
+}
+
+TEST(CcdElementary, TriangleMovesOntoVertex) {
+    // The vertex is still; the triangle rises from z = -1 to z = 1 and meets it at t = 0.5.
+    const Vec3 p{0.3, 0.3, 0.0};
+    const auto pts = moving({p, Vec3{0, 0, -1}, Vec3{1, 0, -1}, Vec3{0, 1, -1}},
+                            {p, Vec3{0, 0, 1}, Vec3{1, 0, 1}, Vec3{0, 1, 1}});
+    const auto r = vertex_face(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-6);
+}
+
+TEST(CcdElementary, TouchingAtStartAndEnd) {
+    // On the triangle at t = 0, leaving: toi 0.
+    auto r = vertex_face(vertex_and_static_triangle({0.2, 0.2, 0.0}, {0.2, 0.2, 1.0}));
+    EXPECT_TRUE(r.hit);
+    EXPECT_EQ(r.toi, 0.0);
+    // Reaching the triangle exactly at t = 1.
+    r = vertex_face(vertex_and_static_triangle({0.2, 0.2, 1.0}, {0.2, 0.2, 0.0}));
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 1.0);
+    EXPECT_GE(r.toi, 1.0 - 2e-6);
+    // Stopping just short of it (2^-30 above) is a miss with a tolerance of 2^-40.
+    ElementaryOptions tight;
+    tight.tolerance = 0x1p-40;
+    EXPECT_FALSE(
+        vertex_face(vertex_and_static_triangle({0.2, 0.2, 1.0}, {0.2, 0.2, 0x1p-30}), tight).hit);
+    // Edges crossing exactly at t = 0 and at t = 1.
+    const std::array<Vec3, 4> crossing = {Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{0, -1, 0},
+                                          Vec3{0, 1, 0}};
+    const std::array<Vec3, 4> lifted = {Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{0, -1, 1},
+                                        Vec3{0, 1, 1}};
+    r = edge_edge(moving(crossing, lifted));
+    EXPECT_TRUE(r.hit);
+    EXPECT_EQ(r.toi, 0.0);
+    r = edge_edge(moving(lifted, crossing));
+    EXPECT_TRUE(r.hit);
+    EXPECT_GE(r.toi, 1.0 - 2e-6);
+}
+
+TEST(CcdElementary, CrossingEdges) {
+    // Edge b drops from z = 1 to z = -1 across edge a: contact at t = 0.5 at the midpoints.
+    const auto pts = moving({Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{0, -1, 1}, Vec3{0, 1, 1}},
+                            {Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{0, -1, -1}, Vec3{0, 1, -1}});
+    const auto r = edge_edge(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-6);
+    // The same drop beside edge a's end (x = 1.5): a miss.
+    auto beside = pts;
+    for (int i : {2, 3, 6, 7}) {
+        beside[static_cast<std::size_t>(i)].x = 1.5;
+    }
+    EXPECT_FALSE(edge_edge(beside).hit);
+}
+
+TEST(CcdElementary, ParallelEdges) {
+    // Parallel edges 0.5 apart, sliding along each other: never touch.
+    auto pts = moving({Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{-2, 0.5, 0}, Vec3{-1, 0.5, 0}},
+                      {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{2, 0.5, 0}, Vec3{3, 0.5, 0}});
+    EXPECT_FALSE(edge_edge(pts).hit);
+    // Parallel and closing: b moves onto a's line at t = 0.5 while overlapping it (a segment of
+    // contacts, the degenerate case).
+    pts = moving({Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, 0.5, 0}, Vec3{1.5, 0.5, 0}},
+                 {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, -0.5, 0}, Vec3{1.5, -0.5, 0}});
+    auto r = edge_edge(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-6);
+    // Collinear, sliding into each other along the common line: first contact at t = 0.25.
+    pts = moving({Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{2, 0, 0}, Vec3{3, 0, 0}},
+                 {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{-2, 0, 0}, Vec3{-1, 0, 0}});
+    r = edge_edge(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.25);
+    EXPECT_GE(r.toi, 0.25 - 1e-6);
+}
+
+TEST(CcdElementary, DegenerateTriangleAndEdge) {
+    // A triangle collapsed to the point (0.5, 0.5, 0): the vertex passes through it, or beside.
+    const Vec3 c{0.5, 0.5, 0.0};
+    auto pts = CcdPoints{Vec3{0.5, 0.5, 1}, c, c, c, Vec3{0.5, 0.5, -1}, c, c, c};
+    auto r = vertex_face(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    pts[0].x = pts[4].x = 0.5 + 1e-3;
+    EXPECT_FALSE(vertex_face(pts).hit);
+    // A triangle collapsed to a segment from (0,0,0) to (1,0,0): crossed at x = 0.5, t = 0.5.
+    pts = CcdPoints{Vec3{0.5, 0, 1},  Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, 0, 0},
+                    Vec3{0.5, 0, -1}, Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, 0, 0}};
+    r = vertex_face(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-6);
+    // An edge collapsed to a point crossing a segment, and passing beside its end.
+    pts = moving({Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.25, 0, 1}, Vec3{0.25, 0, 1}},
+                 {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.25, 0, -1}, Vec3{0.25, 0, -1}});
+    r = edge_edge(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    for (int i : {2, 3, 6, 7}) {
+        pts[static_cast<std::size_t>(i)].x = 1.25;
+    }
+    EXPECT_FALSE(edge_edge(pts).hit);
+    // Both edges points: they meet at t = 0.5 or miss by 1e-3.
+    pts = moving({Vec3{0, 0, 0}, Vec3{0, 0, 0}, Vec3{1, 1, 1}, Vec3{1, 1, 1}},
+                 {Vec3{1, 1, 1}, Vec3{1, 1, 1}, Vec3{0, 0, 0}, Vec3{0, 0, 0}});
+    EXPECT_TRUE(edge_edge(pts).hit);
+    pts[2].z = pts[3].z = 1.002;
+    EXPECT_FALSE(edge_edge(pts).hit);
+}
+
+TEST(CcdElementary, MotionInTheTrianglePlane) {
+    // Sliding in the plane z = 0 into the triangle: enters at x = 0, t = 0.5.
+    auto r = vertex_face(vertex_and_static_triangle({-1, 0.25, 0}, {1, 0.25, 0}));
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-5);
+    // Sliding in the plane beside the triangle (y = -0.1): never inside.
+    EXPECT_FALSE(vertex_face(vertex_and_static_triangle({-1, -0.1, 0}, {1, -0.1, 0})).hit);
+    // Coplanar edges: b sweeps in the plane z = 0 across a's end region and crosses it at t = 0.5.
+    const auto pts = moving({Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, 1, 0}, Vec3{0.5, 2, 0}},
+                            {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0.5, -1, 0}, Vec3{0.5, 0, 0}});
+    r = edge_edge(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    EXPECT_GE(r.toi, 0.5 - 1e-5);
+}
+
+TEST(CcdElementary, MinimumDistance) {
+    // The vertex slides 0.1 above the plane, entering the triangle's column at x = 0 (t = 0.5).
+    const auto pts = vertex_and_static_triangle({-1, 0.25, 0.1}, {1, 0.25, 0.1});
+    ElementaryOptions o;
+    EXPECT_FALSE(vertex_face(pts, o).hit);
+    o.min_distance = 0.05;
+    EXPECT_FALSE(vertex_face(pts, o).hit);
+    o.min_distance = 0.11;
+    auto r = vertex_face(pts, o);
+    EXPECT_TRUE(r.hit);
+    // Within 0.11 from x = -sqrt(0.11^2 - 0.1^2) (t ~ 0.477) on; never later than that.
+    EXPECT_LE(r.toi, 0.5 - std::sqrt(0.11 * 0.11 - 0.01) / 2.0);
+    // Edges passing 0.2 apart (b at z = 0.2 crossing over a).
+    const auto ee = moving({Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{-1, -1, 0.2}, Vec3{-1, 1, 0.2}},
+                           {Vec3{-1, 0, 0}, Vec3{1, 0, 0}, Vec3{1, -1, 0.2}, Vec3{1, 1, 0.2}});
+    o.min_distance = 0.1;
+    EXPECT_FALSE(edge_edge(ee, o).hit);
+    o.min_distance = 0.25;
+    r = edge_edge(ee, o);
+    EXPECT_TRUE(r.hit);
+    EXPECT_EQ(r.toi, 0.0);  // within 0.25 from the start (b is over a's end at x = -1)
+}
+
+TEST(CcdElementary, WorkCapIsConservative) {
+    const auto pts = vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0});
+    for (std::uint32_t cap : {0u, 1u, 2u, 5u, 20u}) {
+        ElementaryOptions o;
+        o.max_boxes = cap;
+        const auto r = vertex_face(pts, o);
+        EXPECT_TRUE(r.hit) << cap;
+        EXPECT_LE(r.toi, 0.5) << cap;
+        EXPECT_LE(r.boxes, cap);
+        if (r.capped) {
+            EXPECT_EQ(r.boxes, cap);
+        }
+    }
+    // A clear miss is excluded by the first region, cap or not.
+    ElementaryOptions one;
+    one.max_boxes = 1;
+    const auto miss = vertex_face(vertex_and_static_triangle({5, 5, 1}, {5, 5, -1}), one);
+    EXPECT_FALSE(miss.hit);
+    EXPECT_EQ(miss.boxes, 1u);
+}
+
+TEST(CcdElementary, BadInputIsConservative) {
+    auto pts = vertex_and_static_triangle({5, 5, 1}, {5, 5, -1});
+    pts[3].y = std::numeric_limits<double>::quiet_NaN();
+    auto r = vertex_face(pts);
+    EXPECT_TRUE(r.hit);
+    EXPECT_TRUE(r.capped);
+    EXPECT_EQ(r.toi, 0.0);
+    pts[3].y = std::numeric_limits<double>::infinity();
+    EXPECT_TRUE(edge_edge(pts).hit);
+    ElementaryOptions o;
+    o.min_distance = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(vertex_face(vertex_and_static_triangle({5, 5, 1}, {5, 5, -1}), o).hit);
+    // Tolerance 0 or NaN: refined to the width floor, still terminates and still finds contact.
+    o = {};
+    o.tolerance = 0.0;
+    r = vertex_face(vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0}), o);
+    EXPECT_TRUE(r.hit);
+    EXPECT_LE(r.toi, 0.5);
+    o.tolerance = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(
+        vertex_face(vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0}), o).hit);
+}
+
+TEST(CcdElementary, HugeAndTinyCoordinates) {
+    // Scaled by 2^1010 (beyond the overflow guard) and by 2^-1000: the same answers.
+    for (double s : {0x1p1010, 0x1p-1000, 0x1p500}) {
+        auto pts = vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0});
+        for (auto& p : pts) {
+            p = p * s;
+        }
+        ElementaryOptions o;
+        o.tolerance = 1e-6 * s;
+        auto r = vertex_face(pts, o);
+        EXPECT_TRUE(r.hit) << s;
+        EXPECT_LE(r.toi, 0.5) << s;
+        EXPECT_GE(r.toi, 0.5 - 1e-5) << s;
+        auto miss = vertex_and_static_triangle({0.6, 0.6, 1.0}, {0.6, 0.6, -1.0});
+        for (auto& p : miss) {
+            p = p * s;
+        }
+        EXPECT_FALSE(vertex_face(miss, o).hit) << s;
+    }
+}
+
+// Random queries with an exact contact at t = 1/2: small dyadic coordinates, so every point of
+// the construction is exact in double. The test must report it, no later than t = 1/2.
+TEST(CcdElementary, RandomExactContactsAreFound) {
+    std::mt19937_64 rng(12345);
+    std::uniform_int_distribution<int> coord(-64, 64);
+    std::uniform_int_distribution<int> eighths(0, 8);
+    auto point = [&] { return Vec3{coord(rng) / 16.0, coord(rng) / 16.0, coord(rng) / 16.0}; };
+    int vf_hits = 0;
+    int ee_hits = 0;
+    for (int i = 0; i < 2000; ++i) {
+        // vertex-face: a triangle moving randomly; the vertex at t = 1/2 is a point of it.
+        CcdPoints pts;
+        for (int j = 1; j < 4; ++j) {
+            pts[static_cast<std::size_t>(j)] = point();
+            pts[static_cast<std::size_t>(j + 4)] = point();
+        }
+        int ui = eighths(rng);
+        int vi = std::uniform_int_distribution<int>(0, 8 - ui)(rng);
+        const double u = ui / 8.0;
+        const double v = vi / 8.0;
+        auto mid = [&](int j) {
+            return 0.5 * (pts[static_cast<std::size_t>(j)] + pts[static_cast<std::size_t>(j + 4)]);
+        };
+        const Vec3 x = mid(1) + u * (mid(2) - mid(1)) + v * (mid(3) - mid(1));
+        pts[0] = point();
+        pts[4] = 2.0 * x - pts[0];
+        auto r = vertex_face(pts);
+        ASSERT_TRUE(r.hit) << "vf query " << i;
+        ASSERT_LE(r.toi, 0.5) << "vf query " << i;
+        vf_hits += r.hit ? 1 : 0;
+
+        // edge-edge: edge a moving randomly; edge b's midpoint at t = 1/2 is a point of a.
+        for (int j : {0, 1, 3}) {
+            pts[static_cast<std::size_t>(j)] = point();
+            pts[static_cast<std::size_t>(j + 4)] = point();
+        }
+        ui = eighths(rng);
+        const Vec3 xa = mid(0) + (ui / 8.0) * (mid(1) - mid(0));
+        const Vec3 b0_mid = 2.0 * xa - mid(3);  // b's midpoint (v = 1/2) is xa
+        pts[2] = point();
+        pts[6] = 2.0 * b0_mid - pts[2];
+        r = edge_edge(pts);
+        ASSERT_TRUE(r.hit) << "ee query " << i;
+        ASSERT_LE(r.toi, 0.5) << "ee query " << i;
+        ee_hits += r.hit ? 1 : 0;
+    }
+    EXPECT_EQ(vf_hits, 2000);
+    EXPECT_EQ(ee_hits, 2000);
+}
+
+// Random separated queries (the two primitives' swept boxes 0.5 apart on x): never a hit.
+TEST(CcdElementary, RandomSeparatedQueriesAreMisses) {
+    std::mt19937_64 rng(777);
+    std::uniform_real_distribution<double> c(0.0, 1.0);
+    for (int i = 0; i < 2000; ++i) {
+        CcdPoints pts;
+        for (std::size_t j = 0; j < 8; ++j) {
+            pts[j] = {c(rng), c(rng), c(rng)};
+        }
+        // vf: the vertex (0, 4) shifted to x in [1.5, 2.5]; ee: edge a (0, 1, 4, 5) likewise.
+        auto vf = pts;
+        vf[0].x += 1.5;
+        vf[4].x += 1.5;
+        EXPECT_FALSE(vertex_face(vf).hit) << i;
+        auto ee = pts;
+        for (std::size_t j : {0u, 1u, 4u, 5u}) {
+            ee[j].x += 1.5;
+        }
+        EXPECT_FALSE(edge_edge(ee).hit) << i;
+    }
+}
+
+// ---- The rounding-error bound against exact arithmetic -------------------------------------
+
+class Q {
+  public:
+    Q() { mpq_init(m_q); }
+    explicit Q(double d) : Q() { mpq_set_d(m_q, d); }
+    ~Q() { mpq_clear(m_q); }
+    Q(const Q& o) : Q() { mpq_set(m_q, o.m_q); }
+    Q& operator=(const Q& o) {
+        mpq_set(m_q, o.m_q);
+        return *this;
+    }
+    friend Q operator+(const Q& a, const Q& b) {
+        Q r;
+        mpq_add(r.m_q, a.m_q, b.m_q);
+        return r;
+    }
+    friend Q operator-(const Q& a, const Q& b) {
+        Q r;
+        mpq_sub(r.m_q, a.m_q, b.m_q);
+        return r;
+    }
+    friend Q operator*(const Q& a, const Q& b) {
+        Q r;
+        mpq_mul(r.m_q, a.m_q, b.m_q);
+        return r;
+    }
+    mpq_t& get() { return m_q; }
+    const mpq_t& get() const { return m_q; }
+    double to_double() const { return mpq_get_d(m_q); }
+
+  private:
+    mpq_t m_q;
+};
+
+// A random rational near `center` (within `spread`), with a large denominator, and the double it
+// rounds to (mpq_get_d truncates: within 1 ulp, the bound's assumption).
+struct Coordinate {
+    Q exact;
+    double rounded;
+};
+
+Coordinate random_rational(std::mt19937_64& rng, double center, double spread) {
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    Coordinate c;
+    Q base(center + spread * unit(rng));
+    // Perturb by a non-dyadic amount below 1 ulp: base + k / (3 * 7 * 2^80) * |base|.
+    Q frac;
+    mpq_set_si(frac.get(), static_cast<long>(rng() % 1000) - 500, 21);
+    mpz_mul_2exp(mpq_denref(frac.get()), mpq_denref(frac.get()), 62);
+    mpq_canonicalize(frac.get());
+    Q mag(std::max(std::abs(base.to_double()), 1e-300));
+    c.exact = base + frac * mag * Q(0x1p-2);
+    c.rounded = c.exact.to_double();
+    return c;
+}
+
+Q lerp(const Q& x0, const Q& x1, const Q& t) {
+    return (Q(1.0) - t) * x0 + t * x1;
+}
+
+// Exact F_k at (t, u, v) on the exact coordinates xs[point][frame].
+Q exact_f(CcdKind kind, const std::array<std::array<Q, 2>, 4>& xs, double t, double u, double v) {
+    const Q qt(t), qu(u), qv(v);
+    std::array<Q, 4> x;
+    for (std::size_t j = 0; j < 4; ++j) {
+        x[j] = lerp(xs[j][0], xs[j][1], qt);
+    }
+    if (kind == CcdKind::vertex_face) {
+        return x[0] - x[1] - qu * (x[2] - x[1]) - qv * (x[3] - x[1]);
+    }
+    return x[0] + qu * (x[1] - x[0]) - x[2] - qv * (x[3] - x[2]);
+}
+
+struct Scenario {
+    const char* name;
+    double center;       // coordinates near this
+    double spread;       // ... within this
+    double motion;       // t1 positions differ from t0 by up to this
+    double common_move;  // and everything translates by up to this
+};
+
+TEST(CcdElementary, RoundingErrorBoundHoldsAgainstExactArithmetic) {
+    const Scenario scenarios[] = {
+        {"unit box", 0.0, 1.0, 1.0, 0.0},
+        {"large offset, tiny motion", 1e6, 1e-3, 1e-9, 0.0},
+        {"huge offset, tiny features", 3e12, 1e-4, 1e-7, 1e-7},
+        {"near-cancellation", 1.0, 1e-12, 1e-12, 0.5},
+        {"mixed magnitudes", 0.0, 1e8, 1e-6, 0.0},
+        {"tiny", 0.0, 1e-200, 1e-200, 0.0},
+        {"large", 0.0, 1e250, 1e250, 0.0},
+    };
+    std::mt19937_64 rng(2024);
+    std::uniform_int_distribution<int> level(0, 50);
+    double worst_ratio = 0.0;
+    for (const auto& sc : scenarios) {
+        for (int trial = 0; trial < 300; ++trial) {
+            const CcdKind kind = trial % 2 == 0 ? VF : EE;
+            // Exact rational coordinates per axis, point, frame, and their doubles.
+            std::array<std::array<std::array<Q, 2>, 4>, 3> exact;
+            CcdPoints pts;
+            std::uniform_real_distribution<double> unit(-1.0, 1.0);
+            const double shift = sc.common_move * unit(rng);
+            for (int k = 0; k < 3; ++k) {
+                for (int j = 0; j < 4; ++j) {
+                    const auto c0 = random_rational(rng, sc.center, sc.spread);
+                    const auto c1 = random_rational(rng, c0.rounded + shift + sc.motion * unit(rng),
+                                                    sc.motion * 1e-3);
+                    exact[static_cast<std::size_t>(k)][static_cast<std::size_t>(j)] = {c0.exact,
+                                                                                       c1.exact};
+                    pts[static_cast<std::size_t>(j)][k] = c0.rounded;
+                    pts[static_cast<std::size_t>(j + 4)][k] = c1.rounded;
+                }
+            }
+            // A random dyadic region: bisection points at random depths.
+            auto dyadic_interval = [&] {
+                const int l = level(rng);
+                const double w = std::ldexp(1.0, -l);
+                const auto cells = static_cast<std::uint64_t>(std::ldexp(1.0, l));
+                const double lo = static_cast<double>(rng() % cells) * w;
+                return std::array<double, 2>{lo, lo + w};
+            };
+            const auto ti = dyadic_interval();
+            const auto ui = dyadic_interval();
+            const auto vi = dyadic_interval();
+            const CcdRegion region{ti[0], ti[1], ui[0], ui[1], vi[0], vi[1]};
+            const auto cv = elementary_corner_values(kind, pts, region);
+            ASSERT_TRUE(cv.valid) << sc.name;
+            for (int k = 0; k < 3; ++k) {
+                const auto ks = static_cast<std::size_t>(k);
+                for (int c = 0; c < 8; ++c) {
+                    const Q fe = exact_f(kind, exact[ks], ti[c >> 2], ui[(c >> 1) & 1], vi[c & 1]);
+                    const Q diff = Q(cv.values[ks][static_cast<std::size_t>(c)]) - fe;
+                    const double err = std::abs(diff.to_double());
+                    ASSERT_LE(err, cv.error_bound[ks])
+                        << sc.name << " trial " << trial << " axis " << k << " corner " << c;
+                    if (cv.error_bound[ks] > 0.0) {
+                        worst_ratio = std::max(worst_ratio, err / cv.error_bound[ks]);
+                    }
+                }
+            }
+        }
+    }
+    std::printf("largest |computed - exact| / bound: %.3g\n", worst_ratio);
+    EXPECT_LT(worst_ratio, 1.0);
+}
+
+TEST(CcdElementary, CornerValuesRejectBadRegions) {
+    const auto pts = vertex_and_static_triangle({0.25, 0.25, 1.0}, {0.25, 0.25, -1.0});
+    EXPECT_TRUE(elementary_corner_values(VF, pts, {0, 1, 0, 0.5, 0.25, 0.75}).valid);
+    EXPECT_FALSE(elementary_corner_values(VF, pts, {0, 1.5, 0, 1, 0, 1}).valid);
+    EXPECT_FALSE(elementary_corner_values(VF, pts, {0, 0.1, 0, 1, 0, 1}).valid);  // not dyadic
+    auto bad = pts;
+    bad[0].x = std::numeric_limits<double>::infinity();
+    EXPECT_FALSE(elementary_corner_values(VF, bad, {0, 1, 0, 1, 0, 1}).valid);
+}
+
+// ---- Acceptance: the public benchmark, zero false negatives ---------------------------------
+
+TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
+    const fs::path root = fs::path(PROXIMA_DATA_DIR) / "ccd-queries";
+    if (!fs::is_directory(root)) {
+        GTEST_SKIP() << "CCD benchmark data not found at " << root
+                     << " (PROXIMA_DATA_DIR/ccd-queries)";
+    }
+    std::vector<fs::path> files;
+    for (const auto& e : fs::recursive_directory_iterator(root)) {
+        if (e.is_regular_file() && e.path().extension() == ".csv") {
+            files.push_back(e.path());
+        }
+    }
+    std::sort(files.begin(), files.end());
+    ASSERT_GE(files.size(), 42u);
+    std::size_t queries = 0;
+    std::size_t positives = 0;
+    std::size_t false_negatives = 0;
+    std::size_t false_positives = 0;
+    std::size_t capped = 0;
+    const auto start = std::chrono::steady_clock::now();
+    for (const auto& file : files) {
+        const auto kind = ccd_kind_from_path(file.string());
+        ASSERT_TRUE(kind.has_value()) << file;
+        auto read = read_ccd_queries(file.string());
+        ASSERT_TRUE(read.ok()) << read.status().to_string();
+        for (std::size_t i = 0; i < read->size(); ++i) {
+            const auto& q = read.value()[i];
+            ASSERT_TRUE(q.truth.has_value()) << file;
+            const auto r = elementary(*kind, q.points);
+            ++queries;
+            positives += *q.truth ? 1 : 0;
+            capped += r.capped ? 1 : 0;
+            if (*q.truth && !r.hit) {
+                ++false_negatives;
+                ADD_FAILURE() << "false negative: " << file << " query " << i;
+            }
+            false_positives += (!*q.truth && r.hit) ? 1 : 0;
+            EXPECT_GE(r.toi, 0.0);
+            EXPECT_LE(r.toi, 1.0);
+        }
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::printf(
+        "ccd-queries: %zu queries (%zu colliding) in %zu files: %zu false negatives, %zu "
+        "false positives, %zu capped, %.2f s with parsing\n",
+        queries, positives, files.size(), false_negatives, false_positives, capped, seconds);
+    EXPECT_EQ(queries, 7279u);
+    EXPECT_EQ(positives, 435u);
+    EXPECT_EQ(false_negatives, 0u);
+}
+
+}  // namespace
+}  // namespace proxima::ccd
