@@ -1,7 +1,267 @@
+// proxima ccd: continuous collision detection between two frames of a scene given as two mesh
+// files with the same topology (each vertex moves linearly from its position in T0_FILE to its
+// position in T1_FILE). Every vertex-triangle and edge-edge pair that touches in [0, 1], within
+// and between objects, with its time of impact; per object pair and for the scene the earliest.
+// Local mode runs the engine in this process; --server creates a scene on the daemon with the
+// T0 objects and sends one CCD frame with the T1 positions (the result is a ccd::CcdResult either
+// way and is printed by the same function, so the two modes print the same answer).
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
 #include "cli/commands.hpp"
+#include "client/proxima_client.hpp"
+#include "common/local_scene.hpp"
+#include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/scene.hpp"
 
 namespace proxima::cli {
 
-void add_ccd_command(CLI::App& /*app*/, int& /*exit_code*/) {}
+namespace {
+
+struct CcdArgs {
+    bool local = false;
+    std::string server;
+    bool split_components = false;
+    double min_distance = 0.0;
+    bool json = false;
+    std::vector<std::string> files;
+};
+
+int fail(const Status& status) {
+    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
+    return 1;
+}
+
+nlohmann::json pair_json(const ccd::CcdPair& p) {
+    return {{"kind", ccd::ccd_kind_name(p.kind)},
+            {"object", p.object},
+            {"primitive", p.primitive},
+            {"other", p.other},
+            {"other_primitive", p.other_primitive},
+            {"toi", p.toi},
+            {"capped", p.capped}};
+}
+
+// The two frames as loaded: the objects of T0_FILE (the scene at t = 0) and the vertices of the
+// same objects in T1_FILE. Both files must give the same objects with the same triangles.
+struct Frames {
+    std::vector<client::InputObject> objects;  // at t = 0
+    std::vector<std::vector<Vec3>> positions_t1;
+};
+
+StatusOr<Frames> load_frames(const CcdArgs& args) {
+    auto t0 = client::load_objects({args.files[0]}, args.split_components);
+    if (!t0.ok()) {
+        return t0.status();
+    }
+    auto t1 = client::load_objects({args.files[1]}, args.split_components);
+    if (!t1.ok()) {
+        return t1.status();
+    }
+    const auto& a = t0.value();
+    const auto& b = t1.value();
+    const std::string both = "'" + args.files[0] + "' and '" + args.files[1] + "'";
+    if (a.size() != b.size()) {
+        return invalid_argument(both +
+                                " do not have the same topology: " + std::to_string(a.size()) +
+                                " objects at t0, " + std::to_string(b.size()) + " at t1");
+    }
+    Frames frames;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        const auto& ma = a[i].mesh.mesh;
+        const auto& mb = b[i].mesh.mesh;
+        if (ma.vertices.size() != mb.vertices.size()) {
+            return invalid_argument(both + " do not have the same topology: object " +
+                                    std::to_string(i) + " has " +
+                                    std::to_string(ma.vertices.size()) + " vertices at t0, " +
+                                    std::to_string(mb.vertices.size()) + " at t1");
+        }
+        if (ma.triangles != mb.triangles) {
+            return invalid_argument(
+                both + " do not have the same topology: the triangles of object " +
+                std::to_string(i) + " differ (" + std::to_string(ma.triangles.size()) + " at t0, " +
+                std::to_string(mb.triangles.size()) + " at t1)");
+        }
+        frames.positions_t1.push_back(mb.vertices);
+    }
+    frames.objects = std::move(t0).value();
+    return frames;
+}
+
+// Prints a CCD result, local or from a daemon. Indices are those of the objects as loaded:
+// objects in file order (or by connected component with --split-components); a vf primitive is a
+// vertex and other_primitive a triangle of the objects' meshes; ee primitives are edge indices
+// (the sorted unique vertex pairs of an object's triangles).
+void print_ccd_result(const std::vector<client::InputObject>& objects, const ccd::CcdResult& r,
+                      bool json) {
+    const auto& st = r.stats;
+    if (json) {
+        nlohmann::json doc;
+        doc["objects"] = nlohmann::json::array();
+        for (const auto& o : objects) {
+            doc["objects"].push_back({{"name", o.mesh.name},
+                                      {"file", o.file},
+                                      {"component", o.component},
+                                      {"vertices", o.mesh.mesh.vertices.size()},
+                                      {"triangles", o.mesh.mesh.triangles.size()}});
+        }
+        doc["pairs"] = nlohmann::json::array();
+        for (const auto& p : r.pairs) {
+            doc["pairs"].push_back(pair_json(p));
+        }
+        doc["object_pairs"] = nlohmann::json::array();
+        for (const auto& op : r.object_pairs) {
+            auto e = pair_json(r.pairs[op.pair]);
+            // The object pair in (object <= other) order; the contact keeps its own roles.
+            e["contact_object"] = e["object"];
+            e["contact_other"] = e["other"];
+            e["object"] = op.object;
+            e["other"] = op.other;
+            e["toi"] = op.toi;
+            doc["object_pairs"].push_back(std::move(e));
+        }
+        doc["earliest"] = r.earliest ? pair_json(r.pairs[*r.earliest]) : nlohmann::json(nullptr);
+        doc["stats"] = {{"candidate_pairs", st.candidate_pairs},
+                        {"elementary_tests", st.elementary_tests},
+                        {"brute_force_tests", st.brute_force_tests},
+                        {"capped_tests", st.capped_tests},
+                        {"object_pairs_tested", st.object_pairs_tested},
+                        {"broad_phase_seconds", st.broad_phase_seconds},
+                        {"narrow_phase_seconds", st.narrow_phase_seconds},
+                        {"total_seconds", st.total_seconds}};
+        std::cout << doc.dump() << '\n';
+        return;
+    }
+    auto name = [&](std::uint32_t i) {
+        return i < objects.size() ? objects[i].mesh.name : "object " + std::to_string(i);
+    };
+    std::size_t vf = 0;
+    for (const auto& p : r.pairs) {
+        vf += p.kind == ccd::CcdKind::vertex_face ? 1 : 0;
+    }
+    std::printf("%zu contacts (%zu vertex-face, %zu edge-edge) in %zu object pairs\n",
+                r.pairs.size(), vf, r.pairs.size() - vf, r.object_pairs.size());
+    if (r.earliest) {
+        const auto& p = r.pairs[*r.earliest];
+        std::printf("earliest: toi %.9g, %s %s %u of %s - %s %u of %s%s\n", p.toi,
+                    ccd::ccd_kind_name(p.kind),
+                    p.kind == ccd::CcdKind::vertex_face ? "vertex" : "edge", p.primitive,
+                    name(p.object).c_str(),
+                    p.kind == ccd::CcdKind::vertex_face ? "triangle" : "edge", p.other_primitive,
+                    name(p.other).c_str(), p.capped ? " (capped)" : "");
+    } else {
+        std::printf("no contact in [0, 1]\n");
+    }
+    for (const auto& op : r.object_pairs) {
+        const auto& p = r.pairs[op.pair];
+        std::printf("%-30s %-30s  toi %.9g (%s %u - %u)\n", name(op.object).c_str(),
+                    name(op.other).c_str(), op.toi, ccd::ccd_kind_name(p.kind), p.primitive,
+                    p.other_primitive);
+    }
+    std::printf(
+        "%llu candidate triangle pairs, %llu elementary tests (brute force: %llu), %llu "
+        "capped; broad %.3f ms, narrow %.3f ms, total %.3f ms\n",
+        static_cast<unsigned long long>(st.candidate_pairs),
+        static_cast<unsigned long long>(st.elementary_tests),
+        static_cast<unsigned long long>(st.brute_force_tests),
+        static_cast<unsigned long long>(st.capped_tests), st.broad_phase_seconds * 1e3,
+        st.narrow_phase_seconds * 1e3, st.total_seconds * 1e3);
+}
+
+StatusOr<ccd::CcdResult> ccd_local(const Frames& frames, const ccd::CcdRequest& request) {
+    Scene scene;
+    for (const auto& obj : frames.objects) {
+        auto id = scene.add_object(obj.mesh);
+        if (!id.ok()) {
+            return id.status();
+        }
+    }
+    return ccd::continuous_collisions(scene, frames.positions_t1, request);
+}
+
+// On the daemon: a scene with the T0 objects (in input order, so indices mean the same as
+// locally), one CCD frame moving every object to its T1 positions, then the scene is deleted.
+StatusOr<ccd::CcdResult> ccd_remote(const std::string& address, const Frames& frames,
+                                    const ccd::CcdRequest& request) {
+    auto c = client::Client::connect(address);
+    if (!c.ok()) {
+        return c.status();
+    }
+    std::vector<NamedMesh> meshes;
+    for (const auto& obj : frames.objects) {
+        meshes.push_back(obj.mesh);
+    }
+    auto scene = c.value()->create_scene("proxima ccd", meshes);
+    if (!scene.ok()) {
+        return scene.status();
+    }
+    client::FrameRequest frame;
+    frame.ccd = true;
+    frame.ccd_request = request;
+    frame.queries.separation = false;
+    for (std::size_t i = 0; i < frames.objects.size(); ++i) {
+        frame.update.positions.push_back({scene->objects[i].id, frames.positions_t1[i]});
+    }
+    auto response = c.value()->query(scene->scene_id, frame);
+    if (Status deleted = c.value()->delete_scene(scene->scene_id); !deleted.ok()) {
+        std::fprintf(stderr, "proxima: warning: could not delete scene %s: %s\n",
+                     scene->scene_id.c_str(), deleted.to_string().c_str());
+    }
+    if (!response.ok()) {
+        return response.status();
+    }
+    if (!response->ccd) {
+        return Status(StatusCode::internal, "the daemon's answer has no CCD result");
+    }
+    // Object and pair indices were checked when the answer was decoded.
+    return std::move(*response->ccd);
+}
+
+int run_ccd(const CcdArgs& args) {
+    auto frames = load_frames(args);
+    if (!frames.ok()) {
+        return fail(frames.status());
+    }
+    ccd::CcdRequest request;
+    request.elementary.min_distance = args.min_distance;
+    auto result = args.server.empty() ? ccd_local(frames.value(), request)
+                                      : ccd_remote(args.server, frames.value(), request);
+    if (!result.ok()) {
+        return fail(result.status());
+    }
+    print_ccd_result(frames->objects, result.value(), args.json);
+    return 0;
+}
+
+}  // namespace
+
+void add_ccd_command(CLI::App& app, int& exit_code) {
+    auto args = std::make_shared<CcdArgs>();
+    auto* cmd = app.add_subcommand(
+        "ccd",
+        "Continuous collisions between two frames: every vertex moves linearly from T0_FILE to "
+        "T1_FILE (same topology)");
+    auto* local_flag =
+        cmd->add_flag("--local", args->local, "Run the engine in this process (the default)");
+    auto* server_opt = cmd->add_option("--server", args->server,
+                                       "Run on the proximad daemon at HOST:PORT instead");
+    server_opt->excludes(local_flag);
+    cmd->add_flag("--split-components", args->split_components,
+                  "Make each connected component of a file an object");
+    cmd->add_option("--min-distance", args->min_distance,
+                    "Report contact when primitives come within this distance (default 0)")
+        ->check(CLI::NonNegativeNumber);
+    cmd->add_flag("--json", args->json, "Print one JSON object");
+    cmd->add_option("files", args->files, "T0_FILE T1_FILE: the two frames (any mesh format)")
+        ->required()
+        ->expected(2);
+    cmd->callback([args, &exit_code] { exit_code = run_ccd(*args); });
+}
 
 }  // namespace proxima::cli

@@ -136,6 +136,10 @@ class ServerCli(unittest.TestCase):
             "two": [box_off((0, 0, 0), (1, 1, 1)), box_off((0, 0, 1.25), (1, 1, 2))],
             # 52K vertices, 102K triangles: both buffers take two 1 MiB upload chunks.
             "grid": [grid_off(227, 1.1)],
+            # Two frames of one scene: the second box sweeps through the first.
+            "sweep0": [box_off((0, 0, 0), (1, 1, 1)), box_off((2, 0.25, 0.25), (2.5, 0.75, 0.75))],
+            "sweep1": [box_off((0, 0, 0), (1, 1, 1)),
+                       box_off((-1, 0.25, 0.25), (-0.5, 0.75, 0.75))],
         }
         for name, parts in shapes.items():
             cls.files[name] = os.path.join(cls.tmp, name + ".off")
@@ -166,6 +170,17 @@ class ServerCli(unittest.TestCase):
         # Exact equality, floats included: float64 on the wire and the same engine.
         self.assertEqual(strip_stats(local), strip_stats(remote), f"{args} {server_flags}")
         return remote
+
+    def test_ccd_server_equals_local(self):
+        args = ("ccd", "--split-components", "--json", self.files["sweep0"], self.files["sweep1"])
+        local = self.json_of(*args)
+        remote = self.json_of(*args[:1], "--server", self.daemon.address, *args[1:])
+        self.assertEqual(strip_stats(local), strip_stats(remote))
+        self.assertGreater(len(local["pairs"]), 0)
+        self.assertEqual(len(local["object_pairs"]), 1)
+        # The small box (x from 2 to -1 over the frame) first meets x = 1 at t = 1/3.
+        self.assertLessEqual(local["earliest"]["toi"], 1 / 3)
+        self.assertGreater(local["earliest"]["toi"], 1 / 3 - 1e-5)
 
     def test_distance_boxes_apart_touching_crossing(self):
         doc = self.assert_same_as_local("a", "apart")
