@@ -1,6 +1,7 @@
 #include "proxima/culling/culler.hpp"
 
 #include "culling/cullers.hpp"
+#include "proxima/culling/dvd.hpp"
 
 namespace proxima {
 
@@ -12,6 +13,10 @@ const char* culler_name(CullerKind kind) {
             return "brute";
         case CullerKind::bvh:
             return "bvh";
+        case CullerKind::voronoi_cpu:
+            return "voronoi-cpu";
+        case CullerKind::voronoi_gpu:
+            return "voronoi-gpu";
     }
     return "unknown";
 }
@@ -26,16 +31,31 @@ StatusOr<CullerKind> parse_culler(std::string_view name) {
     if (name == "bvh") {
         return CullerKind::bvh;
     }
+    if (name == "voronoi-cpu") {
+        return CullerKind::voronoi_cpu;
+    }
+    if (name == "voronoi-gpu") {
+        return CullerKind::voronoi_gpu;
+    }
     return invalid_argument("unknown culler '" + std::string(name) +
-                            "' (expected auto, brute or bvh)");
+                            "' (expected auto, brute, bvh, voronoi-cpu or voronoi-gpu)");
 }
 
 std::unique_ptr<Culler> make_culler(CullerKind kind) {
     if (kind == CullerKind::brute) {
         return std::make_unique<detail::BruteCuller>();
     }
-    // `automatic` picks the BVH culler until the discrete-Voronoi culler lands with its cost model.
+    if (kind == CullerKind::voronoi_cpu) {
+        return make_voronoi_culler(kind, dvd::make_cpu_backend());
+    }
+    // `automatic` is resolved by ProximityEngine's cost model; alone it means the BVH culler.
+    // voronoi_gpu needs a backend: make_voronoi_culler.
     return std::make_unique<detail::BvhCuller>();
+}
+
+std::unique_ptr<Culler> make_voronoi_culler(CullerKind kind,
+                                            std::shared_ptr<dvd::Backend> backend) {
+    return std::make_unique<detail::VoronoiCuller>(kind, std::move(backend));
 }
 
 }  // namespace proxima

@@ -9,6 +9,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "proxima/culling/dvd.hpp"
 #include "proxima/distance/bounds.hpp"
 #include "proxima/distance/primitives.hpp"
 
@@ -158,19 +159,25 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
 // Pairs tied with an object's best are still searched (thresholds are widened, the search bound
 // is the next double up), so the tie-break in `better` sees every tied pair and the answer does
 // not depend on scheduling.
-void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrune& sap, Work& work,
-                    QueryResult& result) {
+// With the discrete-Voronoi culler, Stage II (refine_separation) lowers the upper bounds before
+// the object pairs are chosen, and its per-triangle lower bounds cull inside nearest_between.
+Status run_separation(const Scene& scene, Culler& culler, const SweepAndPrune& sap, Work& work,
+                      QueryResult& result) {
     const std::size_t n = scene.size();
     result.separation.assign(n, Separation{});
     if (!culler.object_culling()) {
         run_separation_brute(scene, culler, work, result);
-        return;
+        return {};
     }
     const double slack = rounding_slack(scene_scale(scene));
     std::vector<double> upper(n);
     std::vector<std::vector<std::size_t>> near(n);
+    tbb::parallel_for(std::size_t{0}, n,
+                      [&](std::size_t i) { upper[i] = sap.separation_upper_bound(scene, i); });
+    if (Status s = culler.refine_separation(scene, upper); !s.ok()) {
+        return s;
+    }
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-        upper[i] = sap.separation_upper_bound(scene, i);
         if (std::isfinite(upper[i])) {
             sap.within(scene, i, upper[i], near[i]);
         }
@@ -247,6 +254,7 @@ void run_separation(const Scene& scene, const Culler& culler, const SweepAndPrun
         }
     }
     result.stats.object_pairs_tested += searched;
+    return {};
 }
 
 // Per-triangle best of the intra-object query, shared by the threads of one object's search.
@@ -301,16 +309,26 @@ class SelfBests {
 // culler's dual traversal proposes every pair that may still beat either triangle's bound (a pair
 // seen while seeding may be proposed again: cheaper than remembering it). Brute force tests every
 // non-adjacent pair.
-void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult& result) {
+// With the discrete-Voronoi culler, the kernel's partner of each triangle (Lemma 1: the
+// second-order governor of its best sample) replaces the 2-ring seed where it has one.
+Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result) {
     const std::size_t n = scene.size();
     result.self.assign(n, {});
     for (std::size_t a = 0; a < n; ++a) {
         result.self[a].assign(scene[a].triangle_count(), SelfDistance{});
     }
     const bool cull = culler.object_culling();
+    std::vector<Status> failures(n);
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t a) {
         if (work.should_stop()) {
             return;
+        }
+        std::vector<std::uint32_t> partner;
+        if (cull) {
+            failures[a] = culler.refine_self(scene, a, partner);
+            if (!failures[a].ok()) {
+                return;
+            }
         }
         const SceneObject& obj = scene[a];
         const MeshTopology& topo = *obj.topology;
@@ -321,8 +339,17 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
 
         // Exact test of one pair, skipped when a cheap lower bound shows it cannot beat (or tie)
         // either triangle's current best.
-        auto test = [&](std::uint32_t t, std::uint32_t u, const Triangle& x, std::uint64_t& count) {
-            const Triangle y = corners(obj, u);
+        // The distance is computed with the smaller index first, as brute force does, so the
+        // value is bit-identical whichever way a seed or a traversal proposes the pair.
+        auto test = [&](std::uint32_t t, std::uint32_t u, const Triangle& tx,
+                        std::uint64_t& count) {
+            const Triangle other = corners(obj, u);
+            const bool swapped = t > u;
+            const Triangle& x = swapped ? other : tx;
+            const Triangle& y = swapped ? tx : other;
+            if (swapped) {
+                std::swap(t, u);
+            }
             if (cull) {
                 const double bound = std::max(bests.bound(t), bests.bound(u));
                 if (std::isfinite(bound)) {
@@ -346,6 +373,10 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
                     }
                     std::uint64_t count = 0;
                     for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                        if (!partner.empty() && partner[t] != UINT32_MAX) {
+                            test(t, partner[t], corners(obj, t), count);
+                            continue;
+                        }
                         // Seed §5.2.2, reduced to its best candidate: the 2-ring triangle with the
                         // nearest centroid is almost always the closest or near it, so one exact
                         // test gives each triangle a tight bound; the traversal below finds the
@@ -391,6 +422,12 @@ void run_self(const Scene& scene, const Culler& culler, Work& work, QueryResult&
         bests.finish();
         work.exact_tests += tests.load();
     });
+    for (auto& f : failures) {
+        if (!f.ok()) {
+            return f;
+        }
+    }
+    return {};
 }
 
 // Object pairs (i <= j; i == j for the intra-object part) whose boxes come within `radius`.
@@ -423,9 +460,12 @@ enum class PairTest { intersect, within };
 
 // Runs the exact test on every candidate pair of every object pair within `radius`; appends the
 // pairs that pass to `hits` (sorted) and, when `pns` is given, every candidate to it.
-void run_pairs(const Scene& scene, const Culler& culler, const SweepAndPrune& sap, double radius,
-               PairTest test, Work& work, std::vector<FeaturePair>& hits,
-               std::vector<FeaturePair>* pns, QueryStats& stats) {
+Status run_pairs(const Scene& scene, Culler& culler, const SweepAndPrune& sap, double radius,
+                 PairTest test, Work& work, std::vector<FeaturePair>& hits,
+                 std::vector<FeaturePair>* pns, QueryStats& stats) {
+    if (Status s = culler.refine_within(scene, radius); !s.ok()) {
+        return s;
+    }
     const auto object_pairs = object_pairs_within(scene, culler, sap, radius);
     stats.object_pairs_tested += object_pairs.size();
     const double radius_sq = radius * radius;
@@ -489,6 +529,7 @@ void run_pairs(const Scene& scene, const Culler& culler, const SweepAndPrune& sa
         std::sort(pns->begin(), pns->end());
         stats.pns_pairs = pns->size();
     }
+    return {};
 }
 
 std::uint64_t brute_force_pairs(const Scene& scene) {
@@ -515,17 +556,79 @@ std::uint64_t non_adjacent_pair_count(const MeshTopology& topology) {
 ProximityEngine::ProximityEngine() = default;
 ProximityEngine::~ProximityEngine() = default;
 
-Culler& ProximityEngine::culler_for(CullerKind kind) {
-    if (kind == CullerKind::brute) {
-        if (!m_brute) {
-            m_brute = make_culler(CullerKind::brute);
-        }
-        return *m_brute;
+void ProximityEngine::set_gpu_backend(std::shared_ptr<dvd::Backend> backend) {
+    m_gpu_backend = std::move(backend);
+    m_voronoi_gpu.reset();
+    m_auto = {};
+}
+
+StatusOr<Culler*> ProximityEngine::culler_for(CullerKind kind) {
+    switch (kind) {
+        case CullerKind::brute:
+            if (!m_brute) {
+                m_brute = make_culler(CullerKind::brute);
+            }
+            return m_brute.get();
+        case CullerKind::voronoi_cpu:
+            if (!m_voronoi_cpu) {
+                m_voronoi_cpu = make_voronoi_culler(kind, dvd::make_cpu_backend());
+            }
+            return m_voronoi_cpu.get();
+        case CullerKind::voronoi_gpu:
+            if (!m_gpu_backend) {
+                return failed_precondition("culler voronoi-gpu: no GPU backend (" + m_gpu_reason +
+                                           ")");
+            }
+            if (!m_voronoi_gpu) {
+                m_voronoi_gpu = make_voronoi_culler(kind, m_gpu_backend);
+            }
+            return m_voronoi_gpu.get();
+        case CullerKind::automatic:
+        case CullerKind::bvh:
+            break;
     }
     if (!m_bvh) {
         m_bvh = make_culler(CullerKind::bvh);
     }
-    return *m_bvh;
+    return m_bvh.get();
+}
+
+namespace {
+// The automatic choice: measure both candidates on the first queries of each kind of request,
+// keep the cheaper, and measure the other again every AUTO_REMEASURE queries (scenes change).
+constexpr std::uint64_t AUTO_REMEASURE = 32;
+
+std::size_t request_shape(const QueryRequest& r) {
+    return (r.separation ? 1u : 0u) | (r.self ? 2u : 0u) | (r.collisions ? 4u : 0u) |
+           (r.tolerance ? 8u : 0u) | (r.pns ? 16u : 0u);
+}
+}  // namespace
+
+CullerKind ProximityEngine::choose_automatic(const QueryRequest& request) {
+    const CullerKind voronoi = m_gpu_backend ? CullerKind::voronoi_gpu : CullerKind::voronoi_cpu;
+    const AutoModel& m = m_auto[request_shape(request)];
+    if (m.bvh_seconds < 0) {
+        return CullerKind::bvh;
+    }
+    if (m.voronoi_seconds < 0) {
+        return voronoi;
+    }
+    const bool voronoi_better = m.voronoi_seconds < m.bvh_seconds;
+    if (m.queries % AUTO_REMEASURE == 0) {
+        return voronoi_better ? CullerKind::bvh : voronoi;
+    }
+    return voronoi_better ? voronoi : CullerKind::bvh;
+}
+
+void ProximityEngine::record_automatic(const QueryRequest& request, CullerKind kind,
+                                       double seconds) {
+    AutoModel& m = m_auto[request_shape(request)];
+    ++m.queries;
+    if (kind == CullerKind::bvh) {
+        m.bvh_seconds = seconds;
+    } else {
+        m.voronoi_seconds = seconds;
+    }
 }
 
 StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
@@ -534,10 +637,38 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
         return invalid_argument("tolerance must be a finite distance >= 0, got " +
                                 std::to_string(*request.tolerance));
     }
+    if (request.voronoi_cell &&
+        (!std::isfinite(*request.voronoi_cell) || *request.voronoi_cell <= 0.0)) {
+        return invalid_argument("voronoi cell size must be a finite distance > 0, got " +
+                                std::to_string(*request.voronoi_cell));
+    }
+    if (request.culler == CullerKind::automatic) {
+        // The cost model picks; a Voronoi culler that fails (a GPU error) falls back to the BVH
+        // culler for this query and counts as infinitely slow until measured again.
+        QueryRequest forced = request;
+        forced.culler = choose_automatic(request);
+        auto r = query(forced, cancel);
+        if (!r.ok() && forced.culler != CullerKind::bvh &&
+            r.status().code() != StatusCode::cancelled &&
+            r.status().code() != StatusCode::deadline_exceeded) {
+            record_automatic(request, forced.culler, std::numeric_limits<double>::infinity());
+            forced.culler = CullerKind::bvh;
+            r = query(forced, cancel);
+        }
+        if (r.ok()) {
+            record_automatic(request, forced.culler, r->stats.total_seconds);
+        }
+        return r;
+    }
     const auto t_start = Clock::now();
     QueryResult result;
     auto& stats = result.stats;
-    Culler& culler = culler_for(request.culler);
+    auto culler_or = culler_for(request.culler);
+    if (!culler_or.ok()) {
+        return culler_or.status();
+    }
+    Culler& culler = *culler_or.value();
+    culler.set_cell(request.voronoi_cell);
     stats.culler = culler_name(culler.kind());
     if (!request.separation && !request.self && !request.collisions && !request.tolerance &&
         !request.pns) {
@@ -564,29 +695,43 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     work.should_stop();  // a request cancelled (or past its deadline) before it starts does nothing
     if (request.separation) {
         t0 = Clock::now();
-        run_separation(m_scene, culler, m_sap, work, result);
+        if (Status s = run_separation(m_scene, culler, m_sap, work, result); !s.ok()) {
+            return s;
+        }
         stats.separation_seconds = seconds_since(t0);
     }
     if (request.self) {
         t0 = Clock::now();
-        run_self(m_scene, culler, work, result);
+        if (Status s = run_self(m_scene, culler, work, result); !s.ok()) {
+            return s;
+        }
         stats.self_seconds = seconds_since(t0);
     }
     const bool pns_on_tolerance = request.pns && request.tolerance.has_value();
     if (request.collisions) {
         t0 = Clock::now();
-        run_pairs(m_scene, culler, m_sap, 0.0, PairTest::intersect, work, result.collisions,
-                  request.pns && !pns_on_tolerance ? &result.pns : nullptr, stats);
+        if (Status s =
+                run_pairs(m_scene, culler, m_sap, 0.0, PairTest::intersect, work, result.collisions,
+                          request.pns && !pns_on_tolerance ? &result.pns : nullptr, stats);
+            !s.ok()) {
+            return s;
+        }
         stats.collision_seconds = seconds_since(t0);
     }
     if (request.tolerance) {
         t0 = Clock::now();
-        run_pairs(m_scene, culler, m_sap, *request.tolerance, PairTest::within, work,
-                  result.tolerance, pns_on_tolerance ? &result.pns : nullptr, stats);
+        if (Status s = run_pairs(m_scene, culler, m_sap, *request.tolerance, PairTest::within, work,
+                                 result.tolerance, pns_on_tolerance ? &result.pns : nullptr, stats);
+            !s.ok()) {
+            return s;
+        }
         stats.tolerance_seconds = seconds_since(t0);
     }
     if (request.pns && !request.collisions && !request.tolerance) {
         // Candidates only: no exact test is counted for a PNS-only request.
+        if (Status s = culler.refine_within(m_scene, 0.0); !s.ok()) {
+            return s;
+        }
         std::vector<TrianglePair> cands;
         for (auto [i, j] : object_pairs_within(m_scene, culler, m_sap, 0.0)) {
             cands.clear();
@@ -607,6 +752,13 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     }
     stats.exact_tests = work.exact_tests.load();
     stats.brute_force_tests = brute_force_pairs(m_scene);
+    const VoronoiStats vs = culler.take_voronoi_stats();
+    stats.voronoi_seconds = vs.seconds;
+    stats.dvd_seconds = vs.dvd_seconds;
+    stats.dvd_samples = vs.samples;
+    stats.dvd_cell = vs.cell;
+    stats.voronoi_culled = vs.culled;
+    stats.dvd_epsilon = vs.epsilon;
     stats.total_seconds = seconds_since(t_start);
     return result;
 }

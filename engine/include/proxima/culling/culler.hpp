@@ -2,10 +2,14 @@
 // Culling strategies behind one interface. A culler only proposes candidate triangle pairs; the
 // query code runs the exact test on each, so every culler gives the answer brute force gives as
 // long as it never drops a pair that could matter (its bounds are conservative). The
-// discrete-Voronoi culler plugs in here too.
+// discrete-Voronoi culler (seed 000 §4-5.2) plugs in here too: it adds Stage II hooks
+// (refine_*) that the query calls before each stage; the other cullers ignore them.
 
 #include <cstdint>
+#include <limits>
 #include <memory>
+#include <optional>
+#include <string>
 #include <string_view>
 #include <type_traits>
 #include <utility>
@@ -13,12 +17,17 @@
 
 #include "proxima/scene.hpp"
 
+namespace proxima::dvd {
+class Backend;
+}
+
 namespace proxima {
 
-enum class CullerKind { automatic, brute, bvh };
+enum class CullerKind { automatic, brute, bvh, voronoi_cpu, voronoi_gpu };
 
+// "auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu".
 const char* culler_name(CullerKind kind);
-// Parses "auto", "brute" or "bvh"; unknown names give an invalid_argument status.
+// Parses the names above; unknown names give an invalid_argument status.
 StatusOr<CullerKind> parse_culler(std::string_view name);
 
 // Non-owning reference to a callable, for the per-candidate callback (no allocation, one
@@ -49,6 +58,18 @@ using TrianglePair = std::pair<std::uint32_t, std::uint32_t>;
 // The current squared distance bound of a triangle (for intra-object searches).
 using BoundLookup = FunctionRef<double(std::uint32_t)>;
 
+// What the discrete-Voronoi stage of one query did (zero for the other cullers).
+struct VoronoiStats {
+    double seconds = 0;      // whole Stage II: sampling, buckets, kernel, bounds
+    double dvd_seconds = 0;  // the kernel (Backend::run) alone
+    std::uint64_t samples = 0;
+    double cell = 0;  // grid cell size of the last kernel run
+    // Triangle pairs a box test let through that a Voronoi lower bound removed.
+    std::uint64_t culled = 0;
+    // Largest error allowance (kernel_error_bound + triangle_error_term) used.
+    double epsilon = 0;
+};
+
 class Culler {
   public:
     virtual ~Culler() = default;
@@ -77,8 +98,36 @@ class Culler {
     // for a == b the non-adjacent pairs with ta < tb.
     virtual void pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
                               std::vector<TrianglePair>& out) const = 0;
+
+    // ---- Stage II hooks (seed §5.2). Defaults do nothing, so a culler without Stage II is
+    // unaffected. Each is called after prepare() for the scene it is given. ----
+
+    // Grid cell size for the next refinements: a positive size, or nullopt for automatic.
+    virtual void set_cell(std::optional<double> /*cell*/) {}
+    // Separation: may lower object_upper[i] (a conservative upper bound on object i's separation
+    // distance, one per scene object) and records per-triangle lower bounds that
+    // nearest_between() uses for this scene state.
+    virtual Status refine_separation(const Scene& /*scene*/,
+                                     std::vector<double>& /*object_upper*/) {
+        return {};
+    }
+    // Tolerance / collisions / PNS with `radius`: records per-triangle lower bounds that
+    // pairs_within(..., radius, ...) uses.
+    virtual Status refine_within(const Scene& /*scene*/, double /*radius*/) { return {}; }
+    // Self query of object a: partner[t] = a non-adjacent triangle likely closest to t (or
+    // UINT32_MAX), for the query to seed t's bound with one exact test. May be called for
+    // several objects at once from different threads.
+    virtual Status refine_self(const Scene& /*scene*/, std::size_t /*a*/,
+                               std::vector<std::uint32_t>& partner) {
+        partner.clear();
+        return {};
+    }
+    // Statistics since the last call (and resets them).
+    virtual VoronoiStats take_voronoi_stats() { return {}; }
 };
 
 std::unique_ptr<Culler> make_culler(CullerKind kind);
+// The discrete-Voronoi culler on a kernel backend (kind voronoi_cpu or voronoi_gpu, as given).
+std::unique_ptr<Culler> make_voronoi_culler(CullerKind kind, std::shared_ptr<dvd::Backend> backend);
 
 }  // namespace proxima

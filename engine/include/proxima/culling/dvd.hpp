@@ -83,7 +83,19 @@ float point_triangle_distance_squared(const float p[3], const float a[3], const 
 // An upper bound on |computed - exact| for the distance the kernel returns (not squared), for
 // coordinates (relative to the origin) of magnitude at most `max_abs_coordinate` and the
 // rounding of double inputs to float. The culler adds it to every discrete distance.
+//
+// The sequence is spelled out in engine/src/culling/dvd_cpu.cpp (comment block at the top): three
+// edge candidates, and the supporting-plane distance when a generous inside test passes.
+// The bound covers every well-shaped triangle; a triangle whose normal is ill-conditioned (a
+// "cap", nearly collinear corners) adds triangle_error_term below. The culler's epsilon is
+// kernel_error_bound(M) + the largest triangle_error_term over the kernel's triangles.
 double kernel_error_bound(double max_abs_coordinate);
+
+// Extra error allowance of one triangle (corners a, b, c in double, relative to the kernel's
+// origin, in the kernel's corner order): min(2 * inradius, 128 * kappa * u * M) with
+// kappa = |ab| |ac| / |ab x ac| and u = 2^-24. 0 for an exactly degenerate triangle.
+double triangle_error_term(const double a[3], const double b[3], const double c[3],
+                           double max_abs_coordinate);
 
 class Backend {
   public:

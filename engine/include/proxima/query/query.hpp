@@ -8,6 +8,7 @@
 // object's topology; distances are Euclidean, in scene units; two triangles are adjacent when they
 // share a vertex index, and adjacent pairs are excluded from intra-object queries.
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -45,6 +46,9 @@ struct QueryRequest {
     std::optional<double> tolerance;  // report pairs with distance <= tolerance (>= 0)
     bool pns = false;                 // report the culler's candidates for the tolerance (or 0)
     CullerKind culler = CullerKind::automatic;
+    // Grid cell size of the discrete-Voronoi cullers (> 0, scene units); unset: automatic
+    // (a multiple of the mean edge length).
+    std::optional<double> voronoi_cell;
 };
 
 inline constexpr std::int64_t NO_OBJECT = -1;
@@ -94,6 +98,15 @@ struct QueryStats {
     std::uint64_t brute_force_tests = 0;
     std::uint64_t object_pairs_tested = 0;
     std::uint64_t pns_pairs = 0;
+    // Discrete-Voronoi culler (zero for the others): Stage II seconds (sampling, buckets, kernel,
+    // bounds), the kernel alone, kernel samples, grid cell size, candidate pairs removed by the
+    // Voronoi lower bounds, and the largest kernel error allowance used.
+    double voronoi_seconds = 0;
+    double dvd_seconds = 0;
+    std::uint64_t dvd_samples = 0;
+    double dvd_cell = 0;
+    std::uint64_t voronoi_culled = 0;
+    double dvd_epsilon = 0;
 };
 
 struct QueryResult {
@@ -120,14 +133,35 @@ class ProximityEngine {
     // Runs the requested queries on the current scene. Fails with invalid_argument for a bad
     // request (negative or non-finite tolerance), cancelled / deadline_exceeded when the token says
     // so (partial results are discarded).
+    // Culler `voronoi_gpu` without a GPU backend fails with failed_precondition.
     StatusOr<QueryResult> query(const QueryRequest& request, const CancelToken* cancel = nullptr);
 
+    // The GPU backend of the discrete-Voronoi kernel (gpu::make_egl_backend), or null for none.
+    // Without one, `voronoi_gpu` is refused and `automatic` chooses among the CPU cullers.
+    void set_gpu_backend(std::shared_ptr<dvd::Backend> backend);
+    // Why there is no GPU backend (shown in the failed_precondition message), e.g. the EGL error.
+    void set_gpu_unavailable_reason(std::string reason) { m_gpu_reason = std::move(reason); }
+    bool has_gpu_backend() const { return m_gpu_backend != nullptr; }
+
   private:
-    Culler& culler_for(CullerKind kind);
+    StatusOr<Culler*> culler_for(CullerKind kind);
+    CullerKind choose_automatic(const QueryRequest& request);
+    void record_automatic(const QueryRequest& request, CullerKind kind, double seconds);
 
     Scene m_scene;
     std::unique_ptr<Culler> m_brute;
     std::unique_ptr<Culler> m_bvh;
+    std::unique_ptr<Culler> m_voronoi_cpu;
+    std::unique_ptr<Culler> m_voronoi_gpu;
+    std::shared_ptr<dvd::Backend> m_gpu_backend;
+    std::string m_gpu_reason = "no GPU backend was set";
+    // The automatic choice's cost model, per kind of request (which queries it asks).
+    struct AutoModel {
+        std::uint64_t queries = 0;
+        double bvh_seconds = -1;      // last measured total, < 0: not yet
+        double voronoi_seconds = -1;  // of the Voronoi culler on the best backend
+    };
+    std::array<AutoModel, 32> m_auto{};
     SweepAndPrune m_sap;
     std::uint64_t m_sap_generation = ~0ull;
 };
