@@ -151,10 +151,15 @@ StatusOr<CullerKind> decode_culler(v1::Culler culler) {
             return CullerKind::brute;
         case v1::CULLER_BVH:
             return CullerKind::bvh;
+        case v1::CULLER_VORONOI_CPU:
+            return CullerKind::voronoi_cpu;
+        case v1::CULLER_VORONOI_GPU:
+            return CullerKind::voronoi_gpu;
         default:
-            return invalid_argument("queries.culler: unknown culler " +
-                                    std::to_string(static_cast<int>(culler)) +
-                                    " (CULLER_AUTO, CULLER_BRUTE or CULLER_BVH)");
+            return invalid_argument(
+                "queries.culler: unknown culler " + std::to_string(static_cast<int>(culler)) +
+                " (CULLER_AUTO, CULLER_BRUTE, CULLER_BVH, CULLER_VORONOI_CPU or "
+                "CULLER_VORONOI_GPU)");
     }
 }
 
@@ -289,6 +294,8 @@ void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out) {
     out->set_candidate_pairs(s.candidate_pairs);
     out->set_elementary_tests(s.elementary_tests);
     out->set_capped_tests(s.capped_tests);
+    out->set_brute_force_tests(s.brute_force_tests);
+    out->set_object_pairs_tested(s.object_pairs_tested);
     out->set_broad_phase_seconds(s.broad_phase_seconds);
     out->set_narrow_phase_seconds(s.narrow_phase_seconds);
     out->set_total_seconds(s.total_seconds);

@@ -62,12 +62,13 @@ StatusOr<std::string> Daemon::start() {
     const auto address = host + ":" + std::to_string(port);
     const auto& l = m_config.limits;
     spdlog::info(
-        "proximad {} serving proxima.v1 on {} backend=\"{}\" gl_renderer=none "
+        "proximad {} serving proxima.v1 on {} backend=\"{}\" gl_renderer=\"{}\" "
         "max_scenes={} max_objects_per_scene={} max_triangles_per_scene={} "
         "max_message_bytes={} max_frames_in_flight={} drain_seconds={}",
-        PROXIMA_VERSION, address, PROXIMITY_BACKEND, l.max_scenes, l.max_objects_per_scene,
-        l.max_triangles_per_scene, l.max_message_bytes, l.max_frames_in_flight,
-        m_config.drain_seconds);
+        PROXIMA_VERSION, address, m_service->proximity_backend(),
+        m_service->gl_renderer().empty() ? "none" : m_service->gl_renderer(), l.max_scenes,
+        l.max_objects_per_scene, l.max_triangles_per_scene, l.max_message_bytes,
+        l.max_frames_in_flight, m_config.drain_seconds);
     return address;
 }
 

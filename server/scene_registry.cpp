@@ -21,7 +21,18 @@ std::shared_ptr<SceneEntry> SceneRegistry::make_entry(std::string name, bool str
     }
     char id[17];
     std::snprintf(id, sizeof(id), "%016llx", static_cast<unsigned long long>(bits));
-    return std::make_shared<SceneEntry>(id, std::move(name), stream_owned);
+    auto entry = std::make_shared<SceneEntry>(id, std::move(name), stream_owned);
+    if (m_gpu) {
+        entry->engine.set_gpu_backend(m_gpu);
+    } else {
+        entry->engine.set_gpu_unavailable_reason(m_gpu_reason);
+    }
+    return entry;
+}
+
+void SceneRegistry::set_gpu(std::shared_ptr<dvd::Backend> backend, std::string unavailable_reason) {
+    m_gpu = std::move(backend);
+    m_gpu_reason = std::move(unavailable_reason);
 }
 
 Status SceneRegistry::full_status() const {

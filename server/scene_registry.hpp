@@ -12,6 +12,7 @@
 #include <string>
 #include <unordered_map>
 
+#include "proxima/culling/dvd.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/status.hpp"
 
@@ -46,6 +47,10 @@ class SceneRegistry {
   public:
     explicit SceneRegistry(std::uint64_t max_scenes);
 
+    // The daemon's GPU backend (null when EGL did not start, with the reason), given to every
+    // scene's engine made after this call.
+    void set_gpu(std::shared_ptr<dvd::Backend> backend, std::string unavailable_reason);
+
     // A new, unregistered entry with a fresh random-looking id (16 hex digits). Ids are random
     // so that one client cannot guess another's scene by counting.
     std::shared_ptr<SceneEntry> make_entry(std::string name, bool stream_owned);
@@ -65,6 +70,8 @@ class SceneRegistry {
     Status full_status() const;
 
     const std::uint64_t m_max_scenes;
+    std::shared_ptr<dvd::Backend> m_gpu;
+    std::string m_gpu_reason;
     mutable std::mutex m_mu;
     std::unordered_map<std::string, std::shared_ptr<SceneEntry>> m_scenes;
     std::mt19937_64 m_rng;

@@ -17,6 +17,7 @@
 
 #include "convert.hpp"
 #include "frames.hpp"
+#include "proxima/gpu/egl_backend.hpp"
 #include "scene_registry.hpp"
 #include "worker_pool.hpp"
 
@@ -33,6 +34,10 @@ struct ProximityService::Shared {
 
     const ServerConfig config;
     SceneRegistry scenes;
+    // The GPU backend of the Voronoi culler: one EGL context, owned by its own thread, shared by
+    // every scene (GPU jobs run one at a time). Null when EGL did not start or --gpu off.
+    std::shared_ptr<dvd::Backend> gpu;
+    std::string gl_renderer;
 
     // Every reactor enters when gRPC creates it and leaves in its OnDone: the drain waits for
     // the count to reach zero. Returns false once draining, when the call must be refused (with
@@ -627,7 +632,35 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
 };
 
 ProximityService::ProximityService(const ServerConfig& config)
-    : m_shared(std::make_unique<Shared>(config)) {}
+    : m_shared(std::make_unique<Shared>(config)) {
+    std::string reason = "the GPU is off (--gpu off)";
+    if (config.gpu != "off") {
+        auto backend = gpu::make_egl_backend();
+        if (backend.ok()) {
+            m_shared->gpu = std::move(backend).value();
+            // name() is "gpu (<GL_RENDERER>)".
+            const auto name = m_shared->gpu->name();
+            const auto open = name.find('(');
+            m_shared->gl_renderer =
+                open == std::string::npos ? name : name.substr(open + 1, name.size() - open - 2);
+            spdlog::info("gpu backend=egl gl_renderer=\"{}\"", m_shared->gl_renderer);
+        } else {
+            reason = "EGL unavailable: " + backend.status().message();
+            spdlog::warn("gpu backend=cpu reason=\"{}\" (the Voronoi culler runs on the CPU)",
+                         reason);
+        }
+    }
+    m_shared->scenes.set_gpu(m_shared->gpu, reason);
+}
+
+std::string ProximityService::proximity_backend() const {
+    return m_shared->gpu ? "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)"
+                         : "cpu (voronoi-cpu, bvh, brute)";
+}
+
+std::string ProximityService::gl_renderer() const {
+    return m_shared->gl_renderer;
+}
 
 ProximityService::~ProximityService() = default;
 
@@ -669,8 +702,8 @@ grpc::ServerUnaryReactor* ProximityService::GetServerInfo(grpc::CallbackServerCo
     response->set_version(PROXIMA_VERSION);
     response->set_api("proxima.v1");
     encode_limits(m_shared->config.limits, response->mutable_limits());
-    response->set_proximity_backend(PROXIMITY_BACKEND);
-    response->set_gl_renderer("");
+    response->set_proximity_backend(proximity_backend());
+    response->set_gl_renderer(m_shared->gl_renderer);
     response->set_live_scenes(live_scenes());
     response->set_live_streams(live_streams());
     call->complete({});

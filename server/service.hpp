@@ -15,9 +15,6 @@
 
 namespace proxima::server {
 
-// What ServerInfo.proximity_backend reports: the cullers this build can run.
-inline constexpr const char* PROXIMITY_BACKEND = "cpu (bvh, brute)";
-
 class ProximityService final : public v1::Proximity::CallbackService {
   public:
     explicit ProximityService(const ServerConfig& config);
@@ -53,6 +50,11 @@ class ProximityService final : public v1::Proximity::CallbackService {
     std::size_t live_scenes() const;
     std::size_t live_streams() const;
     std::size_t live_calls() const;  // streams, uploads and unary calls in flight
+
+    // What ServerInfo reports: the cullers this daemon can run, e.g.
+    // "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)", and the GL renderer ("" without one).
+    std::string proximity_backend() const;
+    std::string gl_renderer() const;
 
     struct Shared;  // state the reactors share; defined in service.cpp
 

@@ -18,6 +18,7 @@
 #include "client/proxima_client.hpp"
 #include "common/json_output.hpp"
 #include "common/local_scene.hpp"
+#include "proxima/gpu/egl_backend.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
 
@@ -108,9 +109,24 @@ void print_text(const std::vector<client::InputObject>& objects, const QueryResu
                 r.stats.total_seconds * 1e3);
 }
 
+// With --culler voronoi-gpu a local engine starts its own headless EGL context (as the daemon
+// does once at start-up); without it the request fails with EGL's reason.
+void attach_gpu_if_asked(ProximityEngine& engine, CullerKind culler) {
+    if (culler != CullerKind::voronoi_gpu) {
+        return;
+    }
+    auto backend = gpu::make_egl_backend();
+    if (backend.ok()) {
+        engine.set_gpu_backend(std::move(backend).value());
+    } else {
+        engine.set_gpu_unavailable_reason("EGL unavailable: " + backend.status().message());
+    }
+}
+
 StatusOr<DistanceAnswer> query_local(const std::vector<client::InputObject>& objects,
                                      const QueryRequest& request, bool penetration) {
     ProximityEngine engine;
+    attach_gpu_if_asked(engine, request.culler);
     SceneUpdate update;
     for (const auto& obj : objects) {
         update.additions.push_back(obj.mesh);
@@ -346,6 +362,7 @@ void print_demo_header(const DemoArgs& args, const scenes::ProceduralScene& scen
 int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
                    const QueryRequest& request) {
     ProximityEngine engine;
+    attach_gpu_if_asked(engine, request.culler);
     SceneUpdate first;
     first.additions = scene.initial;
     if (auto r = engine.scene().apply(std::move(first)); !r.ok()) {
@@ -616,8 +633,10 @@ int main(int argc, char** argv) {
                            "(implies --collisions)");
         distance->add_flag("--pns", dist.pns,
                            "Also: the culler's candidate pairs for the tolerance (or contact)");
-        distance->add_option("--culler", dist.culler, "auto, brute or bvh")
-            ->check(CLI::IsMember({"auto", "brute", "bvh"}));
+        distance
+            ->add_option("--culler", dist.culler,
+                         "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
+            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
         distance->add_flag("--json", dist.json, "Print one JSON object");
         distance->add_option("files", dist.files, "Mesh files (OBJ, PLY, STL, OFF, glTF, ...)")
             ->required();
@@ -628,8 +647,9 @@ int main(int argc, char** argv) {
         demo->add_option("--scene", demo_args.scene, "skirt, cloth-ball, bowl, ramps or breaking");
         demo->add_option("--frames", demo_args.frames, "Number of frames")
             ->check(CLI::Range(1, 100000));
-        demo->add_option("--culler", demo_args.culler, "auto, brute or bvh")
-            ->check(CLI::IsMember({"auto", "brute", "bvh"}));
+        demo->add_option("--culler", demo_args.culler,
+                         "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
+            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
         demo->add_option("--server", demo_args.server,
                          "Stream the frames to the proximad daemon at HOST:PORT");
         demo->add_flag("--json", demo_args.json, "One JSON object per frame");

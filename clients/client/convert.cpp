@@ -340,6 +340,12 @@ void encode_query(const QueryRequest& request, bool self_points, pb::QuerySpec* 
         case CullerKind::bvh:
             out->set_culler(pb::CULLER_BVH);
             break;
+        case CullerKind::voronoi_cpu:
+            out->set_culler(pb::CULLER_VORONOI_CPU);
+            break;
+        case CullerKind::voronoi_gpu:
+            out->set_culler(pb::CULLER_VORONOI_GPU);
+            break;
     }
     out->set_self_points(self_points);
 }
@@ -363,9 +369,16 @@ StatusOr<QueryRequest> decode_query(const pb::QuerySpec& spec) {
         case pb::CULLER_BVH:
             out.culler = CullerKind::bvh;
             break;
+        case pb::CULLER_VORONOI_CPU:
+            out.culler = CullerKind::voronoi_cpu;
+            break;
+        case pb::CULLER_VORONOI_GPU:
+            out.culler = CullerKind::voronoi_gpu;
+            break;
         default:
             return invalid_argument("unknown culler " + std::to_string(spec.culler()) +
-                                    " (expected CULLER_AUTO, CULLER_BRUTE or CULLER_BVH)");
+                                    " (expected CULLER_AUTO, CULLER_BRUTE, CULLER_BVH, "
+                                    "CULLER_VORONOI_CPU or CULLER_VORONOI_GPU)");
     }
     return out;
 }
@@ -487,6 +500,8 @@ StatusOr<ccd::CcdResult> decode_ccd(const pb::CcdResult& in, std::size_t objects
     s.candidate_pairs = in.candidate_pairs();
     s.elementary_tests = in.elementary_tests();
     s.capped_tests = in.capped_tests();
+    s.brute_force_tests = in.brute_force_tests();
+    s.object_pairs_tested = in.object_pairs_tested();
     s.broad_phase_seconds = in.broad_phase_seconds();
     s.narrow_phase_seconds = in.narrow_phase_seconds();
     s.total_seconds = in.total_seconds();

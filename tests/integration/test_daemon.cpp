@@ -122,8 +122,12 @@ TEST(Daemon, FirstLineHealthAndServerInfo) {
     const auto info = fx.info();
     EXPECT_EQ(info.api(), "proxima.v1");
     EXPECT_FALSE(info.version().empty());
-    EXPECT_EQ(info.proximity_backend(), "cpu (bvh, brute)");
-    EXPECT_EQ(info.gl_renderer(), "");
+    // With EGL (llvmpipe in CI, tests/integration/test_gpu_backend.cpp) or without.
+    if (info.gl_renderer().empty()) {
+        EXPECT_EQ(info.proximity_backend(), "cpu (voronoi-cpu, bvh, brute)");
+    } else {
+        EXPECT_EQ(info.proximity_backend(), "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)");
+    }
     EXPECT_EQ(info.live_scenes(), 0u);
     EXPECT_EQ(info.live_streams(), 0u);
     // The documented defaults (docs/server.md).

@@ -76,12 +76,16 @@ bool closed_and_oriented(const std::vector<TriangleIndices>& tris) {
     return true;
 }
 
-bool is_cloth(const std::string& name) { return name == "skirt" || name == "cloth"; }
+bool is_cloth(const std::string& name) {
+    return name == "skirt" || name == "cloth";
+}
 
 TEST(Procedural, TriangleCountsAsDocumented) {
-    const std::map<std::string, std::size_t> expected{
-        {"skirt", 12000}, {"cloth-ball", 15000}, {"bowl", 4500}, {"ramps", 38000},
-        {"breaking", 5500}};
+    const std::map<std::string, std::size_t> expected{{"skirt", 12000},
+                                                      {"cloth-ball", 15000},
+                                                      {"bowl", 4500},
+                                                      {"ramps", 38000},
+                                                      {"breaking", 5500}};
     const auto scenes = scenes::all(FRAMES);
     ASSERT_EQ(scenes.size(), 5u);
     for (const auto& ps : scenes) {
