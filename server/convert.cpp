@@ -236,6 +236,13 @@ StatusOr<DecodedFrame> decode_frame(const v1::Frame& frame) {
         }
         out.queries.tolerance = q.tolerance();
     }
+    if (q.has_voronoi_cell()) {
+        if (!std::isfinite(q.voronoi_cell()) || q.voronoi_cell() <= 0.0) {
+            return invalid_argument("queries.voronoi_cell must be a finite size > 0, got " +
+                                    std::to_string(q.voronoi_cell()));
+        }
+        out.queries.voronoi_cell = q.voronoi_cell();
+    }
     out.self_points = q.self_points();
     out.ccd = q.ccd();
     out.penetration = q.penetration();
@@ -371,6 +378,12 @@ void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
     st->set_brute_force_tests(s.brute_force_tests);
     st->set_object_pairs_tested(s.object_pairs_tested);
     st->set_pns_pairs(s.pns_pairs);
+    st->set_voronoi_seconds(s.voronoi_seconds);
+    st->set_dvd_seconds(s.dvd_seconds);
+    st->set_dvd_samples(s.dvd_samples);
+    st->set_dvd_cell(s.dvd_cell);
+    st->set_voronoi_culled(s.voronoi_culled);
+    st->set_dvd_epsilon(s.dvd_epsilon);
 }
 
 void encode_object(const SceneObject& object, v1::ObjectInfo* out) {

@@ -56,6 +56,7 @@ struct DistanceArgs {
     double tolerance = -1.0;
     bool penetration = false;
     std::string culler = "auto";
+    double voronoi_cell = 0.0;  // 0: the engine picks
     std::vector<std::string> files;
 };
 
@@ -267,6 +268,9 @@ int run_distance(const DistanceArgs& args) {
     request.collisions = args.collisions || args.penetration;
     request.pns = args.pns;
     request.culler = culler.value();
+    if (args.voronoi_cell > 0.0) {
+        request.voronoi_cell = args.voronoi_cell;
+    }
     if (args.tolerance >= 0.0) {
         request.tolerance = args.tolerance;
     }
@@ -637,6 +641,11 @@ int main(int argc, char** argv) {
             ->add_option("--culler", dist.culler,
                          "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
             ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
+        distance
+            ->add_option("--voronoi-cell", dist.voronoi_cell,
+                         "Voronoi cullers: grid cell size in scene units (default: the engine's "
+                         "choice)")
+            ->check(CLI::PositiveNumber);
         distance->add_flag("--json", dist.json, "Print one JSON object");
         distance->add_option("files", dist.files, "Mesh files (OBJ, PLY, STL, OFF, glTF, ...)")
             ->required();

@@ -329,6 +329,9 @@ void encode_query(const QueryRequest& request, bool self_points, pb::QuerySpec* 
     if (request.tolerance) {
         out->set_tolerance(*request.tolerance);
     }
+    if (request.voronoi_cell) {
+        out->set_voronoi_cell(*request.voronoi_cell);
+    }
     out->set_pns(request.pns);
     switch (request.culler) {
         case CullerKind::automatic:
@@ -357,6 +360,9 @@ StatusOr<QueryRequest> decode_query(const pb::QuerySpec& spec) {
     out.collisions = spec.collisions();
     if (spec.has_tolerance()) {
         out.tolerance = spec.tolerance();
+    }
+    if (spec.has_voronoi_cell()) {
+        out.voronoi_cell = spec.voronoi_cell();
     }
     out.pns = spec.pns();
     switch (spec.culler()) {
@@ -629,6 +635,12 @@ StatusOr<FrameResponse> decode_result(const pb::FrameResult& result) {
     q.brute_force_tests = s.brute_force_tests();
     q.object_pairs_tested = s.object_pairs_tested();
     q.pns_pairs = s.pns_pairs();
+    q.voronoi_seconds = s.voronoi_seconds();
+    q.dvd_seconds = s.dvd_seconds();
+    q.dvd_samples = s.dvd_samples();
+    q.dvd_cell = s.dvd_cell();
+    q.voronoi_culled = s.voronoi_culled();
+    q.dvd_epsilon = s.dvd_epsilon();
     out.server_seconds = s.server_seconds();
     return out;
 }
@@ -688,6 +700,12 @@ void encode_result(const FrameResponse& response, bool self_points, pb::FrameRes
     s->set_brute_force_tests(q.brute_force_tests);
     s->set_object_pairs_tested(q.object_pairs_tested);
     s->set_pns_pairs(q.pns_pairs);
+    s->set_voronoi_seconds(q.voronoi_seconds);
+    s->set_dvd_seconds(q.dvd_seconds);
+    s->set_dvd_samples(q.dvd_samples);
+    s->set_dvd_cell(q.dvd_cell);
+    s->set_voronoi_culled(q.voronoi_culled);
+    s->set_dvd_epsilon(q.dvd_epsilon);
     s->set_server_seconds(response.server_seconds);
 }
 

@@ -38,11 +38,18 @@ nlohmann::json stats_json(const QueryStats& s) {
               {"self", s.self_seconds},
               {"collisions", s.collision_seconds},
               {"tolerance", s.tolerance_seconds},
+              {"voronoi", s.voronoi_seconds},
+              {"dvd_kernel", s.dvd_seconds},
               {"total", s.total_seconds}}},
             {"exact_tests", s.exact_tests},
             {"brute_force_tests", s.brute_force_tests},
             {"object_pairs_tested", s.object_pairs_tested},
-            {"pns_pairs", s.pns_pairs}};
+            {"pns_pairs", s.pns_pairs},
+            {"voronoi",
+             {{"samples", s.dvd_samples},
+              {"cell", s.dvd_cell},
+              {"culled", s.voronoi_culled},
+              {"epsilon", s.dvd_epsilon}}}};
 }
 
 nlohmann::json distance_json(const std::vector<InputObject>& objects, const QueryResult& result,
