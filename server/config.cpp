@@ -132,6 +132,19 @@ Status validate_config(const ServerConfig& config) {
     return {};
 }
 
+nlohmann::json config_json(const ServerConfig& c) {
+    return {{"listen", c.listen},
+            {"max-scenes", c.limits.max_scenes},
+            {"max-objects-per-scene", c.limits.max_objects_per_scene},
+            {"max-triangles-per-scene", c.limits.max_triangles_per_scene},
+            {"max-message-bytes", c.limits.max_message_bytes},
+            {"max-frames-in-flight", c.limits.max_frames_in_flight},
+            {"drain-seconds", c.drain_seconds},
+            {"log-level", c.log_level},
+            {"worker-threads", c.worker_threads},
+            {"gpu", c.gpu}};
+}
+
 ConfigOutcome load_config(int argc, char** argv) {
     const ServerConfig defaults;
     ServerConfig flags;  // what the command line says; only options actually given are used
@@ -143,6 +156,10 @@ ConfigOutcome load_config(int argc, char** argv) {
                    "JSON file with any of the options below (keys: the long flag names without "
                    "the leading dashes); flags given on the command line override it")
         ->check(CLI::ExistingFile);
+    bool check_only = false;
+    app.add_flag("--check-config", check_only,
+                 "Validate the configuration (file and flags), print the effective configuration "
+                 "as JSON with every option, and exit: 0 when valid, 2 when not");
 
     // Each option knows how to copy its value from `flags` into the final configuration, so a
     // flag that was given overrides the file and one that was not leaves the file's value.
@@ -231,6 +248,10 @@ ConfigOutcome load_config(int argc, char** argv) {
     if (Status s = validate_config(config); !s.ok()) {
         std::fprintf(stderr, "proximad: error: %s\n", s.message().c_str());
         return 2;
+    }
+    if (check_only) {
+        std::printf("%s\n", config_json(config).dump(2).c_str());
+        return 0;
     }
     return config;
 }

@@ -47,8 +47,13 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
 // Checks ranges and names (log level, listen address shape, limits > 0).
 Status validate_config(const ServerConfig& config);
 
-// What main() should do: run with a configuration, or exit with a code (0 after --help or
-// --version, 2 after a bad flag or configuration file, with the message already printed).
+// The configuration as a JSON object with every key of the configuration file (the long flag
+// names), e.g. for `proximad --check-config`; apply_json_config of it gives the same config.
+nlohmann::json config_json(const ServerConfig& config);
+
+// What main() should do: run with a configuration, or exit with a code (0 after --help,
+// --version or a good --check-config, which prints the effective configuration as JSON; 2 after a
+// bad flag or configuration file, with the message already printed).
 using ConfigOutcome = std::variant<ServerConfig, int>;
 ConfigOutcome load_config(int argc, char** argv);
 

@@ -171,6 +171,42 @@ class ServerCli(unittest.TestCase):
         self.assertEqual(strip_stats(local), strip_stats(remote), f"{args} {server_flags}")
         return remote
 
+    def test_check_config(self):
+        # The effective configuration, every key, flags over the file; it round-trips as a file;
+        # docs/server.md documents every key; a bad value is exit 2 with a message.
+        conf = os.path.join(self.tmp, "proximad.json")
+        with open(conf, "w") as f:
+            json.dump({"max-scenes": 3, "log-level": "warn"}, f)
+        p = run(ARGS.proximad, "--config", conf, "--max-scenes", "7", "--gpu", "off",
+                "--check-config")
+        self.assertEqual(p.returncode, 0, p.stderr)
+        doc = json.loads(p.stdout)
+        self.assertEqual(doc["max-scenes"], 7)
+        self.assertEqual(doc["log-level"], "warn")
+        self.assertEqual(doc["gpu"], "off")
+        again = os.path.join(self.tmp, "effective.json")
+        with open(again, "w") as f:
+            f.write(p.stdout)
+        p2 = run(ARGS.proximad, "--config", again, "--check-config")
+        self.assertEqual(p2.returncode, 0, p2.stderr)
+        self.assertEqual(json.loads(p2.stdout), doc)
+        server_md = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "docs",
+                                 "server.md")
+        with open(server_md) as f:
+            documented = f.read()
+        for key in doc:
+            self.assertIn(f"`--{key}` / `{key}`", documented, f"{key} is not in docs/server.md")
+        # The shipped configuration file (deploy/proximad.json) is valid and is the defaults.
+        shipped = os.path.join(os.path.dirname(server_md), "..", "deploy", "proximad.json")
+        defaults = run(ARGS.proximad, "--check-config")
+        from_file = run(ARGS.proximad, "--config", shipped, "--check-config")
+        self.assertEqual(defaults.returncode, 0, defaults.stderr)
+        self.assertEqual(from_file.returncode, 0, from_file.stderr)
+        self.assertEqual(json.loads(from_file.stdout), json.loads(defaults.stdout))
+        bad = run(ARGS.proximad, "--gpu", "sometimes", "--check-config")
+        self.assertEqual(bad.returncode, 2)
+        self.assertIn("gpu", bad.stderr)
+
     def test_ccd_server_equals_local(self):
         args = ("ccd", "--split-components", "--json", self.files["sweep0"], self.files["sweep1"])
         local = self.json_of(*args)
