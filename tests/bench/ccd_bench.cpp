@@ -26,6 +26,8 @@
 #include "proxima/ccd/elementary.hpp"
 #include "proxima/io/ccd_queries.hpp"
 
+#include "bench_util.hpp"
+
 namespace {
 
 using namespace proxima;
@@ -68,18 +70,6 @@ void print_row(const Row& r) {
         percentile(r.seconds, 0.99) * 1e3,
         r.seconds.empty() ? 0.0 : *std::max_element(r.seconds.begin(), r.seconds.end()) * 1e3, sum,
         static_cast<double>(r.boxes) / n);
-}
-
-std::string cpu_model() {
-    std::ifstream in("/proc/cpuinfo");
-    std::string line;
-    while (std::getline(in, line)) {
-        if (line.rfind("model name", 0) == 0) {
-            const auto colon = line.find(':');
-            return colon == std::string::npos ? line : line.substr(colon + 2);
-        }
-    }
-    return "unknown";
 }
 
 int usage() {
@@ -155,7 +145,7 @@ int main(int argc, char** argv) {
     }
 
     std::printf("machine: %u hardware threads (nproc), CPU %s; single-threaded run\n",
-                std::thread::hardware_concurrency(), cpu_model().c_str());
+                std::thread::hardware_concurrency(), bench::cpu_model().c_str());
     std::printf("options: tolerance %g, min_distance %g, max_boxes %u, repeat %d\n",
                 options.tolerance, options.min_distance, options.max_boxes, repeat);
     std::printf(

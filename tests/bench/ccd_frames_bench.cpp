@@ -35,6 +35,8 @@
 #include "proxima/mesh/mesh.hpp"
 #include "proxima/scene.hpp"
 
+#include "bench_util.hpp"
+
 namespace {
 
 using namespace proxima;
@@ -79,23 +81,6 @@ int usage(const char* argv0, int code) {
     return code;
 }
 
-std::string cpu_model() {
-    std::ifstream cpuinfo("/proc/cpuinfo");
-    for (std::string line; std::getline(cpuinfo, line);) {
-        if (line.rfind("model name", 0) == 0) {
-            return line.substr(line.find(':') + 2);
-        }
-    }
-    return "unknown CPU";
-}
-
-std::string load_average() {
-    std::ifstream in("/proc/loadavg");
-    std::string one;
-    in >> one;
-    return one.empty() ? "?" : one;
-}
-
 // Both frames read without welding (the simulation's connectivity), split by the components of t0.
 StatusOr<std::pair<Scene, std::vector<std::vector<Vec3>>>> load(const std::string& dir,
                                                                 const FramePair& fp) {
@@ -128,11 +113,6 @@ StatusOr<std::pair<Scene, std::vector<std::vector<Vec3>>>> load(const std::strin
         p1.push_back(std::move(v));
     }
     return std::make_pair(std::move(scene), std::move(p1));
-}
-
-double median(std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
 }  // namespace
@@ -187,7 +167,7 @@ int main(int argc, char** argv) {
     const int cpus = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 0;
     std::printf("proxima_ccd_frames_bench: full-frame CCD (vf + ee, within and between objects)\n");
     std::printf("machine: %d CPUs (nproc), %s; TBB threads: %d; load average %s\n", cpus,
-                cpu_model().c_str(), threads, load_average().c_str());
+                bench::cpu_model().c_str(), threads, bench::load_average().c_str());
     std::printf("min_distance %g, tolerance %g, %d repetition(s), median seconds\n",
                 opt.min_distance, ccd::ElementaryOptions{}.tolerance, opt.reps);
     std::printf(
@@ -252,8 +232,8 @@ int main(int argc, char** argv) {
             static_cast<unsigned long long>(st.candidate_pairs),
             static_cast<unsigned long long>(st.elementary_tests),
             static_cast<unsigned long long>(st.brute_force_tests), last.pairs.size(), vf,
-            static_cast<unsigned long long>(st.capped_tests), earliest, median(broad),
-            median(narrow), median(total));
+            static_cast<unsigned long long>(st.capped_tests), earliest, bench::median(broad),
+            bench::median(narrow), bench::median(total));
         std::fflush(stdout);
     }
     return status;

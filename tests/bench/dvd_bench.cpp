@@ -39,6 +39,8 @@
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
 
+#include "bench_util.hpp"
+
 #ifndef PROXIMA_DATA_DIR
 #define PROXIMA_DATA_DIR ""
 #endif
@@ -46,24 +48,6 @@
 namespace {
 
 using namespace proxima;
-
-double median(std::vector<double> v) {
-    if (v.empty()) {
-        return std::nan("");
-    }
-    std::sort(v.begin(), v.end());
-    const std::size_t n = v.size();
-    return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-std::string fmt(double v, int digits = 2) {
-    if (!std::isfinite(v)) {
-        return "-";
-    }
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-    return buf;
-}
 
 struct Options {
     bool quick = false;
@@ -246,7 +230,11 @@ class Runner {
                 return s;
             }
         }
-        m_series.push_back({scene, query, cfg});
+        Series fresh;
+        fresh.scene = scene;
+        fresh.query = query;
+        fresh.config = cfg;
+        m_series.push_back(std::move(fresh));
         return m_series.back();
     }
 
@@ -353,7 +341,7 @@ void print(const Options& opt, const Runner& runner, const std::string& device) 
     out << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     double bvh_exact = 0;
     for (const auto& s : runner.all()) {
-        const double exact = median(s.exact);
+        const double exact = bench::median(s.exact);
         if (s.config.culler == CullerKind::bvh) {
             bvh_exact = exact;
         }
@@ -361,11 +349,13 @@ void print(const Options& opt, const Runner& runner, const std::string& device) 
             << culler_name(s.config.culler) << " | "
             << (s.config.culler == CullerKind::bvh
                     ? "-"
-                    : s.config.cell + " (" + fmt(median(s.cell), 5) + ")")
-            << " | " << fmt(median(s.samples), 0) << " | " << fmt(1e3 * median(s.dvd)) << " | "
-            << fmt(1e3 * median(s.stage2)) << " | " << fmt(1e3 * median(s.total)) << " | "
-            << fmt(exact, 0) << " | " << fmt(exact > 0 ? bvh_exact / exact : NAN, 2) << " | "
-            << fmt(median(s.culled), 0) << " | " << s.mismatches << " |\n";
+                    : s.config.cell + " (" + bench::fixed(bench::median(s.cell), 5) + ")")
+            << " | " << bench::fixed(bench::median(s.samples), 0) << " | "
+            << bench::fixed(1e3 * bench::median(s.dvd)) << " | "
+            << bench::fixed(1e3 * bench::median(s.stage2)) << " | "
+            << bench::fixed(1e3 * bench::median(s.total)) << " | " << bench::fixed(exact, 0)
+            << " | " << bench::fixed(exact > 0 ? bvh_exact / exact : NAN, 2) << " | "
+            << bench::fixed(bench::median(s.culled), 0) << " | " << s.mismatches << " |\n";
     }
     if (!opt.csv.empty()) {
         std::ofstream csv(opt.csv);
@@ -375,16 +365,16 @@ void print(const Options& opt, const Runner& runner, const std::string& device) 
         double bvh = 0;
         for (const auto& s : runner.all()) {
             if (s.config.culler == CullerKind::bvh) {
-                bvh = median(s.exact);
+                bvh = bench::median(s.exact);
             }
             csv << s.scene << "," << s.triangles << "," << s.query << ","
                 << culler_name(s.config.culler) << ","
                 << (s.config.culler == CullerKind::bvh ? "" : s.config.cell) << ","
-                << median(s.cell) << "," << s.median_edge << "," << median(s.samples) << ","
-                << 1e3 * median(s.dvd) << "," << 1e3 * median(s.stage2) << ","
-                << 1e3 * median(s.total) << "," << median(s.exact) << "," << bvh << ","
-                << median(s.brute) << "," << median(s.culled) << "," << s.mismatches << ",\""
-                << device << "\"\n";
+                << bench::median(s.cell) << "," << s.median_edge << "," << bench::median(s.samples)
+                << "," << 1e3 * bench::median(s.dvd) << "," << 1e3 * bench::median(s.stage2) << ","
+                << 1e3 * bench::median(s.total) << "," << bench::median(s.exact) << "," << bvh
+                << "," << bench::median(s.brute) << "," << bench::median(s.culled) << ","
+                << s.mismatches << ",\"" << device << "\"\n";
         }
         std::cerr << "wrote " << opt.csv << "\n";
     }

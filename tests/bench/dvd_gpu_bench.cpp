@@ -33,6 +33,8 @@
 #include "proxima/gpu/egl_backend.hpp"
 #include "proxima/scenes/procedural.hpp"
 
+#include "bench_util.hpp"
+
 namespace {
 
 using namespace proxima;
@@ -63,16 +65,8 @@ std::string machine() {
     cpu_set_t set;
     CPU_ZERO(&set);
     const int cpus = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 0;
-    std::string model = "?";
-    std::ifstream cpuinfo("/proc/cpuinfo");
-    for (std::string line; std::getline(cpuinfo, line);) {
-        if (line.rfind("model name", 0) == 0) {
-            model = line.substr(line.find(':') + 2);
-            break;
-        }
-    }
-    std::string load = "?";
-    std::ifstream("/proc/loadavg") >> load;
+    const std::string model = bench::cpu_model();
+    const std::string load = bench::load_average();
     const std::time_t now = std::time(nullptr);
     char date[64];
     std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));

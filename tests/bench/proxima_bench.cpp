@@ -46,6 +46,8 @@
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
 
+#include "bench_util.hpp"
+
 #ifndef PROXIMA_DATA_DIR
 #define PROXIMA_DATA_DIR ""
 #endif
@@ -59,25 +61,8 @@ double seconds_since(Clock::time_point t0) {
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-double median(std::vector<double> v) {
-    if (v.empty()) {
-        return std::nan("");
-    }
-    std::sort(v.begin(), v.end());
-    const std::size_t n = v.size();
-    return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-std::string fixed(double v, int digits = 2) {
-    if (!std::isfinite(v)) {
-        return "-";
-    }
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-    return buf;
-}
 std::string ms(double seconds) {
-    return fixed(1e3 * seconds, seconds < 0.01 ? 3 : 2);
+    return bench::fixed(1e3 * seconds, seconds < 0.01 ? 3 : 2);
 }
 std::string count(double v) {
     if (!std::isfinite(v)) {
@@ -388,13 +373,7 @@ Machine machine() {
     cpu_set_t set;
     CPU_ZERO(&set);
     m.cpus = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 0;
-    std::ifstream cpuinfo("/proc/cpuinfo");
-    for (std::string line; std::getline(cpuinfo, line);) {
-        if (line.rfind("model name", 0) == 0) {
-            m.model = line.substr(line.find(':') + 2);
-            break;
-        }
-    }
+    m.model = bench::cpu_model();
     const std::time_t now = std::time(nullptr);
     char buf[64];
     std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
@@ -537,7 +516,7 @@ double median_of(const std::vector<FrameRow>& rows, double FrameRow::*field) {
     for (std::size_t k = 1; k < rows.size(); ++k) {
         v.push_back(rows[k].*field);
     }
-    return median(v);
+    return bench::median(v);
 }
 
 std::vector<double> frame_totals(const std::vector<FrameRow>& rows, bool separation_only) {
@@ -837,7 +816,7 @@ int main(int argc, char** argv) {
                     "culled"};
         for (const auto& p : procedural) {
             const auto& last = p.frames.back();
-            const double frame = median(frame_totals(p.frames, false));
+            const double frame = bench::median(frame_totals(p.frames, false));
             const double goal = procedural_goal(p.name);
             const double exact = median_of(p.frames, &FrameRow::exact);
             const double brute = median_of(p.frames, &FrameRow::brute);
@@ -847,9 +826,10 @@ int main(int argc, char** argv) {
                               ms(median_of(p.frames, &FrameRow::broad)),
                               ms(median_of(p.frames, &FrameRow::separation)),
                               ms(median_of(p.frames, &FrameRow::self)),
-                              ms(median_of(p.frames, &FrameRow::total)), ms(frame), fixed(goal, 0),
-                              1e3 * frame <= goal ? "yes" : "no", count(exact), sci(brute),
-                              fixed(brute / std::max(exact, 1.0), 0) + "x"});
+                              ms(median_of(p.frames, &FrameRow::total)), ms(frame),
+                              bench::fixed(goal, 0), 1e3 * frame <= goal ? "yes" : "no",
+                              count(exact), sci(brute),
+                              bench::fixed(brute / std::max(exact, 1.0), 0) + "x"});
         }
         t.notes = {
             "update = applying the frame's SceneUpdate (validation, boxes; generating "
@@ -864,14 +844,14 @@ int main(int argc, char** argv) {
                     "FCL query",  "FCL total", "ours (update+prepare+broad+separation)",
                     "FCL / ours", "mismatches"};
         for (const auto& p : procedural) {
-            const double fcl_total = median([&] {
+            const double fcl_total = bench::median([&] {
                 std::vector<double> v;
                 for (std::size_t k = 1; k < p.frames.size(); ++k) {
                     v.push_back(p.frames[k].fcl_move + p.frames[k].fcl_query);
                 }
                 return v;
             }());
-            const double ours = median(frame_totals(p.frames, true));
+            const double ours = bench::median(frame_totals(p.frames, true));
             std::size_t mism = 0;
             for (const auto& r : p.frames) {
                 mism += r.mismatches;
@@ -879,7 +859,8 @@ int main(int argc, char** argv) {
             f.rows.push_back({p.name, std::to_string(p.frames.back().objects),
                               ms(median_of(p.frames, &FrameRow::fcl_move)),
                               ms(median_of(p.frames, &FrameRow::fcl_query)), ms(fcl_total),
-                              ms(ours), fixed(fcl_total / ours, 1) + "x", std::to_string(mism)});
+                              ms(ours), bench::fixed(fcl_total / ours, 1) + "x",
+                              std::to_string(mism)});
         }
         f.notes = {
             "mismatches: objects whose separation distance differs from FCL's by more "
@@ -964,21 +945,22 @@ int main(int argc, char** argv) {
                 fcl_total.push_back(r.fcl_move[i] + r.fcl_query[i]);
                 ours.push_back(r.update[i] + r.prepare[i] + r.broad[i] + r.separation[i]);
             }
-            const double f = median(fcl_total);
-            const double o = median(ours);
+            const double f = bench::median(fcl_total);
+            const double o = bench::median(ours);
             const bool met = 1e3 * o <= r.separation_goal && f / o >= 3.0;
             t.rows.push_back({r.name, std::to_string(r.objects), std::to_string(r.triangles),
-                              ms(r.fcl_build), ms(r.our_build), ms(median(r.fcl_move)),
-                              ms(median(r.fcl_query)), ms(f), ms(median(r.update)),
-                              ms(median(r.prepare)), ms(median(r.broad)), ms(median(r.separation)),
-                              ms(o), fixed(f / o, 1) + "x", fixed(r.separation_goal, 1),
-                              met ? "yes" : "no", count(median(r.separation_exact)),
+                              ms(r.fcl_build), ms(r.our_build), ms(bench::median(r.fcl_move)),
+                              ms(bench::median(r.fcl_query)), ms(f), ms(bench::median(r.update)),
+                              ms(bench::median(r.prepare)), ms(bench::median(r.broad)),
+                              ms(bench::median(r.separation)), ms(o), bench::fixed(f / o, 1) + "x",
+                              bench::fixed(r.separation_goal, 1), met ? "yes" : "no",
+                              count(bench::median(r.separation_exact)),
                               std::to_string(r.mismatches) + " / " + std::to_string(r.checks)});
-            const double sm = median(r.self);
+            const double sm = bench::median(r.self);
             const bool has_goal = !std::isnan(r.self_goal);
             self.rows.push_back({r.name, std::to_string(r.triangles), ms(sm),
-                                 count(median(r.self_exact)),
-                                 has_goal ? fixed(r.self_goal, 0) : "-",
+                                 count(bench::median(r.self_exact)),
+                                 has_goal ? bench::fixed(r.self_goal, 0) : "-",
                                  has_goal ? (1e3 * sm <= r.self_goal ? "yes" : "no") : "-"});
         }
         t.notes = {
@@ -1018,10 +1000,10 @@ int main(int argc, char** argv) {
         md << "Command: `" << opt.command_line << "`\n\n"
            << "Machine: " << host.cpus << " CPUs (nproc), " << host.model << "; TBB threads "
            << host.threads << "; " << host.date << ".\n\n"
-           << "One exact triangle-triangle distance test: " << fixed(1e9 * exact_test, 0)
+           << "One exact triangle-triangle distance test: " << bench::fixed(1e9 * exact_test, 0)
            << " ns (single thread, nearby pairs of the skirt).\n\n"
-           << "Wall time " << fixed(wall_seconds, 1) << " s; 1-minute load average " << load_start
-           << " at the start, " << load_end << " at the end.\n";
+           << "Wall time " << bench::fixed(wall_seconds, 1) << " s; 1-minute load average "
+           << load_start << " at the start, " << load_end << " at the end.\n";
         for (const auto& t : tables) {
             t.markdown(md);
         }
