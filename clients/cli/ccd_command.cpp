@@ -193,26 +193,16 @@ StatusOr<ccd::CcdResult> ccd_remote(const std::string& address, const Frames& fr
     if (!c.ok()) {
         return c.status();
     }
-    std::vector<NamedMesh> meshes;
-    for (const auto& obj : frames.objects) {
-        meshes.push_back(obj.mesh);
-    }
-    auto scene = c.value()->create_scene("proxima ccd", meshes);
-    if (!scene.ok()) {
-        return scene.status();
-    }
-    client::FrameRequest frame;
-    frame.ccd = true;
-    frame.ccd_request = request;
-    frame.queries.separation = false;
-    for (std::size_t i = 0; i < frames.objects.size(); ++i) {
-        frame.update.positions.push_back({scene->objects[i].id, frames.positions_t1[i]});
-    }
-    auto response = c.value()->query(scene->scene_id, frame);
-    if (Status deleted = c.value()->delete_scene(scene->scene_id); !deleted.ok()) {
-        std::fprintf(stderr, "proxima: warning: could not delete scene %s: %s\n",
-                     scene->scene_id.c_str(), deleted.to_string().c_str());
-    }
+    auto response = query_in_temporary_scene(
+        *c.value(), "proxima ccd", frames.objects,
+        [&](client::FrameRequest& frame, const client::RemoteScene& scene) {
+            frame.ccd = true;
+            frame.ccd_request = request;
+            frame.queries.separation = false;
+            for (std::size_t i = 0; i < frames.objects.size(); ++i) {
+                frame.update.positions.push_back({scene.objects[i].id, frames.positions_t1[i]});
+            }
+        });
     if (!response.ok()) {
         return response.status();
     }

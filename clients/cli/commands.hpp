@@ -2,7 +2,14 @@
 // Subcommands that live in their own files. Each adds itself to the app; when it is the one
 // the user named, its callback runs it during parsing and stores the exit status in `exit_code`.
 
+#include <functional>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
+
+#include "client/proxima_client.hpp"
+#include "common/local_scene.hpp"
 
 namespace proxima::cli {
 
@@ -11,5 +18,14 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code);
 // proxima ccd: continuous collisions between two frames of mesh files
 // (clients/cli/ccd_command.cpp).
 void add_ccd_command(CLI::App& app, int& exit_code);
+
+// One frame on the daemon in a scene of its own (clients/cli/remote.cpp): creates the scene with
+// `objects` in input order (so result indices mean what they mean locally), lets `fill` complete
+// the frame (it sees the scene's object ids), sends it with the Query RPC, then deletes the
+// scene; a failed delete is a warning on standard error, the answer stands.
+StatusOr<client::FrameResponse> query_in_temporary_scene(
+    client::Client& c, const std::string& scene_name,
+    const std::vector<client::InputObject>& objects,
+    const std::function<void(client::FrameRequest&, const client::RemoteScene&)>& fill);
 
 }  // namespace proxima::cli

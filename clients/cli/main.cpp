@@ -197,6 +197,18 @@ Status check_remote_result(const std::vector<client::InputObject>& objects,
             }
         }
     }
+    for (const auto& p : response.penetrations) {
+        bool ok = triangle_ok(p.object, p.triangle) && triangle_ok(p.other, p.other_triangle);
+        for (auto t : p.triangles) {
+            ok = ok && triangle_ok(p.object, t);
+        }
+        for (auto t : p.other_triangles) {
+            ok = ok && triangle_ok(p.other, t);
+        }
+        if (!ok) {
+            return bad("a penetration names a triangle that does not exist");
+        }
+    }
     return {};
 }
 
@@ -209,47 +221,17 @@ StatusOr<DistanceAnswer> query_remote(const DistanceArgs& args,
     if (!remote.ok()) {
         return remote.status();
     }
-    auto& c = *remote.value();
-    std::vector<NamedMesh> meshes;
-    meshes.reserve(objects.size());
-    for (const auto& obj : objects) {
-        meshes.push_back(obj.mesh);
-    }
-    auto scene = c.create_scene("proxima distance", meshes);
-    if (!scene.ok()) {
-        return scene.status();
-    }
-    client::FrameRequest frame;
-    frame.queries = request;
-    frame.penetration = args.penetration;
-    auto response = c.query(scene->scene_id, frame);
-    if (auto deleted = c.delete_scene(scene->scene_id); !deleted.ok()) {
-        // The answer is still good; the stale scene is the daemon operator's to notice.
-        std::fprintf(stderr, "proxima: warning: could not delete scene %s: %s\n",
-                     scene->scene_id.c_str(), deleted.to_string().c_str());
-    }
+    auto response =
+        cli::query_in_temporary_scene(*remote.value(), "proxima distance", objects,
+                                      [&](client::FrameRequest& frame, const client::RemoteScene&) {
+                                          frame.queries = request;
+                                          frame.penetration = args.penetration;
+                                      });
     if (!response.ok()) {
         return response.status();
     }
     if (auto st = check_remote_result(objects, response.value(), request); !st.ok()) {
         return st;
-    }
-    for (const auto& p : response->penetrations) {
-        auto in_range = [&](std::uint32_t object, std::uint32_t t) {
-            return object < objects.size() && t < objects[object].file_triangle.size();
-        };
-        bool ok = in_range(p.object, p.triangle) && in_range(p.other, p.other_triangle);
-        for (auto t : p.triangles) {
-            ok = ok && in_range(p.object, t);
-        }
-        for (auto t : p.other_triangles) {
-            ok = ok && in_range(p.other, t);
-        }
-        if (!ok) {
-            return Status(StatusCode::internal,
-                          "the daemon's answer is malformed: a penetration names a triangle that "
-                          "does not exist");
-        }
     }
     return DistanceAnswer{std::move(response->result), std::move(response->penetrations)};
 }
