@@ -33,6 +33,8 @@ grpc::StatusCode grpc_code(StatusCode code) {
             return grpc::StatusCode::UNAVAILABLE;
         case StatusCode::internal:
             return grpc::StatusCode::INTERNAL;
+        case StatusCode::data_loss:
+            return grpc::StatusCode::DATA_LOSS;
     }
     return grpc::StatusCode::UNKNOWN;
 }

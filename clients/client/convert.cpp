@@ -100,6 +100,8 @@ Status from_grpc(const grpc::Status& status) {
             return {StatusCode::unavailable, status.error_message()};
         case grpc::StatusCode::INTERNAL:
             return {StatusCode::internal, status.error_message()};
+        case grpc::StatusCode::DATA_LOSS:
+            return {StatusCode::data_loss, status.error_message()};
         default:
             break;
     }
@@ -119,9 +121,6 @@ Status from_grpc(const grpc::Status& status) {
             break;
         case grpc::StatusCode::UNIMPLEMENTED:
             name = "UNIMPLEMENTED";
-            break;
-        case grpc::StatusCode::DATA_LOSS:
-            name = "DATA_LOSS";
             break;
         case grpc::StatusCode::UNAUTHENTICATED:
             name = "UNAUTHENTICATED";
@@ -160,6 +159,9 @@ grpc::Status to_grpc(const Status& status) {
             break;
         case StatusCode::internal:
             code = grpc::StatusCode::INTERNAL;
+            break;
+        case StatusCode::data_loss:
+            code = grpc::StatusCode::DATA_LOSS;
             break;
     }
     return {code, status.message()};

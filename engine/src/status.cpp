@@ -22,6 +22,8 @@ const char* status_code_name(StatusCode code) {
             return "UNAVAILABLE";
         case StatusCode::internal:
             return "INTERNAL";
+        case StatusCode::data_loss:
+            return "DATA_LOSS";
     }
     return "UNKNOWN";
 }

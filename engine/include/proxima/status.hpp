@@ -21,6 +21,7 @@ enum class StatusCode {
     deadline_exceeded,    // the caller's deadline passed
     unavailable,          // a backend (GPU context, file system) cannot serve now
     internal,             // a bug: an invariant did not hold
+    data_loss,            // stored data is corrupt (a checksum mismatch): reported, never served
 };
 
 const char* status_code_name(StatusCode code);
@@ -51,6 +52,9 @@ inline Status not_found(std::string m) {
 inline Status failed_precondition(std::string m) {
     return {StatusCode::failed_precondition, std::move(m)};
 }
+inline Status data_loss(std::string m) {
+    return {StatusCode::data_loss, std::move(m)};
+}
 
 template <class T>
 class [[nodiscard]] StatusOr {
@@ -63,6 +67,9 @@ class [[nodiscard]] StatusOr {
     T& value() & { return *m_value; }
     const T& value() const& { return *m_value; }
     T&& value() && { return std::move(*m_value); }
+    T& operator*() & { return *m_value; }
+    const T& operator*() const& { return *m_value; }
+    T&& operator*() && { return std::move(*m_value); }
     T* operator->() { return &*m_value; }
     const T* operator->() const { return &*m_value; }
 

@@ -1,0 +1,433 @@
+#include "proxima/massive/avatar.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <numeric>
+#include <unordered_set>
+
+#include "proxima/distance/bounds.hpp"
+#include "proxima/massive/verify.hpp"
+#include "proxima/scene.hpp"
+
+namespace proxima::massive {
+
+// ---------------------------------------------------------------------------------------------
+// PieceIndex
+
+PieceIndex::PieceIndex(const std::vector<PieceInfo>& pieces) : m_order(pieces.size()) {
+    std::iota(m_order.begin(), m_order.end(), 0u);
+    std::sort(m_order.begin(), m_order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return std::tie(pieces[a].box.lo.x, a) < std::tie(pieces[b].box.lo.x, b);
+    });
+    m_lo.reserve(pieces.size());
+    m_boxes.reserve(pieces.size());
+    for (const auto& p : pieces) {
+        m_boxes.push_back(p.box);
+        m_max_extent = std::max(m_max_extent, p.box.hi.x - p.box.lo.x);
+    }
+    for (auto i : m_order) {
+        m_lo.push_back(pieces[i].box.lo.x);
+    }
+}
+
+void PieceIndex::within(const Aabb& box, double radius, double slack,
+                        std::vector<std::uint32_t>& out) const {
+    const double r = radius * (1.0 + 1e-9) + slack;
+    const double threshold = r * r;
+    // A piece can only be near if its lo.x lies in [box.lo.x - r - max extent, box.hi.x + r].
+    const double from = box.lo.x - r - m_max_extent * (1.0 + 1e-12);
+    const double to = box.hi.x + r;
+    auto it = std::lower_bound(m_lo.begin(), m_lo.end(), from);
+    for (auto k = static_cast<std::size_t>(it - m_lo.begin()); k < m_lo.size() && m_lo[k] <= to;
+         ++k) {
+        const auto p = m_order[k];
+        if (box_squared_distance(m_boxes[p], box) <= threshold) {
+            out.push_back(p);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// ModelView
+
+ModelView::ModelView(std::shared_ptr<const Store> store, std::shared_ptr<GeometryCache> cache)
+    : m_store(std::move(store)), m_cache(std::move(cache)), m_index(m_store->pieces()) {
+    double scale = 0.0;
+    for (const auto& o : m_store->objects()) {
+        scale = std::max(scale, coordinate_scale(o.box));
+    }
+    m_slack = rounding_slack(scale);
+    auto s = std::make_shared<Snapshot>();
+    s->masked.assign(m_store->objects().size(), 0);
+    m_snapshot = std::move(s);
+}
+
+std::shared_ptr<const ModelView::Snapshot> ModelView::snapshot() const {
+    std::shared_lock lock(m_mutex);
+    return m_snapshot;
+}
+
+std::uint64_t ModelView::version() const {
+    return snapshot()->version;
+}
+
+std::uint32_t ModelView::object_count() const {
+    auto s = snapshot();
+    std::uint32_t n = static_cast<std::uint32_t>(m_store->objects().size());
+    for (const auto& o : s->overlay) {
+        n = std::max(n, o.object + 1);
+    }
+    return n;
+}
+
+bool ModelView::deleted(std::uint32_t object) const {
+    auto s = snapshot();
+    const bool in_overlay = std::any_of(s->overlay.begin(), s->overlay.end(),
+                                        [&](const auto& o) { return o.object == object; });
+    if (object < s->masked.size()) {
+        return s->masked[object] != 0 && !in_overlay;
+    }
+    return !in_overlay;
+}
+
+StatusOr<std::string> ModelView::object_name(std::uint32_t object) const {
+    auto s = snapshot();
+    for (const auto& o : s->overlay) {
+        if (o.object == object) {
+            return o.name;
+        }
+    }
+    if (object < m_store->objects().size()) {
+        return m_store->objects()[object].name;
+    }
+    return not_found("no object " + std::to_string(object) + " in the model");
+}
+
+namespace {
+
+std::shared_ptr<ResidentPiece> overlay_piece(std::uint32_t object, TriangleMesh mesh) {
+    PieceGeometry g;
+    g.vertices = std::move(mesh.vertices);
+    g.triangles = std::move(mesh.triangles);
+    g.source_triangles.resize(g.triangles.size());
+    std::iota(g.source_triangles.begin(), g.source_triangles.end(), 0u);
+    return std::make_shared<ResidentPiece>(UINT32_MAX, object, std::move(g), nullptr);
+}
+
+}  // namespace
+
+Status ModelView::move_object(std::uint32_t object, const Affine& transform) {
+    if (!transform.finite()) {
+        return invalid_argument("move: the transform has a non-finite entry");
+    }
+    if (deleted(object)) {
+        return not_found("move: no object " + std::to_string(object) + " in the model");
+    }
+    // The stored (or as-added) coordinates under the new map.
+    TriangleMesh mesh;
+    std::string name;
+    if (object < m_store->objects().size()) {
+        auto m = read_object(*m_store, object);
+        if (!m.ok()) {
+            return m.status();
+        }
+        mesh = std::move(*m);
+        name = m_store->objects()[object].name;
+    } else {
+        return failed_precondition("move: object " + std::to_string(object) +
+                                   " was added in this session; delete and add it again");
+    }
+    for (auto& v : mesh.vertices) {
+        v = transform.apply(v);
+    }
+    if (Status s = validate_mesh(mesh, "moved object '" + name + "'"); !s.ok()) {
+        return s;
+    }
+    OverlayObject o{object, name, compute_box(mesh.vertices),
+                    overlay_piece(object, std::move(mesh))};
+    std::unique_lock lock(m_mutex);
+    auto next = std::make_shared<Snapshot>(*m_snapshot);
+    std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
+    next->overlay.push_back(std::move(o));
+    next->masked[object] = 1;
+    ++next->version;
+    m_snapshot = std::move(next);
+    return {};
+}
+
+StatusOr<std::uint32_t> ModelView::add_object(ModelObject object) {
+    if (Status s = validate_mesh(object.mesh, "added object '" + object.name + "'"); !s.ok()) {
+        return s;
+    }
+    const Aabb box = compute_box(object.mesh.vertices);
+    std::unique_lock lock(m_mutex);
+    auto next = std::make_shared<Snapshot>(*m_snapshot);
+    std::uint32_t id = static_cast<std::uint32_t>(m_store->objects().size());
+    for (const auto& o : next->overlay) {
+        id = std::max(id, o.object + 1);
+    }
+    id = std::max(id, m_next_added);
+    m_next_added = id + 1;
+    next->overlay.push_back({id, object.name, box, overlay_piece(id, std::move(object.mesh))});
+    ++next->version;
+    m_snapshot = std::move(next);
+    return id;
+}
+
+Status ModelView::delete_object(std::uint32_t object) {
+    if (deleted(object)) {
+        return not_found("delete: no object " + std::to_string(object) + " in the model");
+    }
+    std::unique_lock lock(m_mutex);
+    auto next = std::make_shared<Snapshot>(*m_snapshot);
+    std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
+    if (object < next->masked.size()) {
+        next->masked[object] = 1;
+    }
+    ++next->version;
+    m_snapshot = std::move(next);
+    return {};
+}
+
+// ---------------------------------------------------------------------------------------------
+// AvatarTracker
+
+StatusOr<std::unique_ptr<AvatarTracker>> AvatarTracker::create(std::shared_ptr<ModelView> view,
+                                                               TriangleMesh avatar,
+                                                               std::uint64_t id) {
+    if (Status s = validate_mesh(avatar, "avatar"); !s.ok()) {
+        return s;
+    }
+    std::unique_ptr<AvatarTracker> t(new AvatarTracker());
+    t->m_view = std::move(view);
+    t->m_mesh = std::move(avatar);
+    t->m_id = id;
+    return t;
+}
+
+namespace {
+
+// Per-object best under the tolerance ordering (distance, object triangle, avatar triangle) or
+// the nearest ordering (distance, object, avatar triangle, object triangle: the engine's
+// separation order for the avatar's closest object).
+bool tolerance_better(const PairHit& h, const AvatarHit& best) {
+    if (h.squared_distance != best.distance) {
+        return h.squared_distance < best.distance;
+    }
+    return std::tie(h.triangle_a, h.triangle_b) <
+           std::tie(best.object_triangle, best.avatar_triangle);
+}
+
+AvatarHit to_hit(std::uint32_t object, const PairHit& h) {
+    return {object, h.squared_distance, h.triangle_a, h.triangle_b, h.point_a, h.point_b};
+}
+
+}  // namespace
+
+StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQueryOptions& options,
+                                            const CancelToken* cancel) {
+    if (!pose.finite()) {
+        return invalid_argument("avatar pose has a non-finite entry");
+    }
+    if (!std::isfinite(options.tolerance) || options.tolerance < 0.0) {
+        return invalid_argument("tolerance must be a finite distance >= 0");
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    AvatarResult result;
+    m_posed.resize(m_mesh.vertices.size());
+    for (std::size_t v = 0; v < m_posed.size(); ++v) {
+        m_posed[v] = pose.apply(m_mesh.vertices[v]);
+    }
+    const Aabb box = compute_box(m_posed);
+    LazyBvh avatar(m_posed, m_mesh.triangles);
+    const auto snap = m_view->snapshot();
+    const auto& store = m_view->store();
+    auto& cache = *m_view->cache();
+    const auto& pieces = store->pieces();
+    const double slack = std::max(m_view->slack(), rounding_slack(coordinate_scale(box)));
+    const double tol_sq = options.tolerance * options.tolerance;
+
+    // Tests one candidate (a stored piece, or an overlay object when piece == UINT32_MAX).
+    auto test = [&](std::uint32_t piece, const ResidentPiece* overlay, double bound_sq,
+                    bool ties_avatar_first, std::uint32_t& object) -> StatusOr<PairHit> {
+        PieceHandle handle;
+        const ResidentPiece* p = overlay;
+        if (p == nullptr) {
+            auto h = cache.get(store, piece);
+            if (!h.ok()) {
+                return h.status();
+            }
+            handle = *h;
+            p = handle.get();
+        }
+        object = p->object;
+        ++result.pieces_tested;
+        auto& rp = const_cast<ResidentPiece&>(*p);
+        PairHit hit = closest_pair({&rp.bvh, &rp.geometry.source_triangles}, {&avatar, nullptr},
+                                   bound_sq, slack, ties_avatar_first);
+        result.exact_tests += hit.exact_tests;
+        return hit;
+    };
+    auto stopped = [&] { return cancel != nullptr && cancel->should_stop(); };
+
+    // 1. Objects within the tolerance (collisions: distance 0).
+    std::vector<std::uint32_t> cands;
+    m_view->index().within(box, options.tolerance, slack, cands);
+    result.candidate_pieces = cands.size();
+    std::vector<AvatarHit> best;  // per object, squared distance in `distance` until the end
+    auto merge = [&](std::uint32_t object, const PairHit& h) {
+        auto it = std::find_if(best.begin(), best.end(),
+                               [&](const AvatarHit& b) { return b.object == object; });
+        if (it == best.end()) {
+            best.push_back(to_hit(object, h));
+        } else if (tolerance_better(h, *it)) {
+            *it = to_hit(object, h);
+        }
+    };
+    for (auto p : cands) {
+        if (snap->masked[pieces[p].object] != 0) {
+            continue;
+        }
+        if (stopped()) {
+            return Status{StatusCode::cancelled, "avatar query cancelled"};
+        }
+        std::uint32_t object = 0;
+        auto hit = test(p, nullptr, tol_sq, false, object);
+        if (!hit.ok()) {
+            return hit.status();
+        }
+        if (hit->found) {
+            merge(object, *hit);
+        }
+    }
+    for (const auto& o : snap->overlay) {
+        if (box_squared_distance(o.box, box) > cull_threshold_sq(tol_sq, slack)) {
+            continue;
+        }
+        std::uint32_t object = 0;
+        auto hit = test(0, o.piece.get(), tol_sq, false, object);
+        if (!hit.ok()) {
+            return hit.status();
+        }
+        if (hit->found) {
+            merge(object, *hit);
+        }
+    }
+    std::sort(best.begin(), best.end(),
+              [](const AvatarHit& a, const AvatarHit& b) { return a.object < b.object; });
+    for (auto& h : best) {
+        h.distance = std::sqrt(h.distance);
+        if (h.distance == 0.0) {
+            result.collisions.push_back(h);
+        }
+    }
+    result.within = std::move(best);
+
+    // 2. The nearest object: candidates in growing radii around the avatar's box, starting from
+    // the previous pose's distance plus how far the box moved (temporal coherence).
+    if (options.nearest && (!pieces.empty() || !snap->overlay.empty())) {
+        double radius = options.tolerance;
+        if (m_has_previous) {
+            const Vec3 dlo = box.lo - m_previous_box.lo;
+            const Vec3 dhi = box.hi - m_previous_box.hi;
+            const double moved = std::sqrt(std::max(squared_norm(dlo), squared_norm(dhi)));
+            radius = std::max(radius, m_previous_nearest + moved);
+        }
+        for (const auto& h : result.within) {
+            radius = std::max(radius, h.distance);
+        }
+        radius = std::max(radius, 1e-3 * norm(box.extent()));
+        bool have = false;
+        double best_sq = std::numeric_limits<double>::infinity();
+        AvatarHit nearest;
+        std::unordered_set<std::uint32_t> tested;
+        auto consider = [&](std::uint32_t object, const PairHit& h) {
+            if (!h.found) {
+                return;
+            }
+            bool better = !have || h.squared_distance < best_sq;
+            if (have && h.squared_distance == best_sq) {
+                better = std::tie(object, h.triangle_b, h.triangle_a) <
+                         std::tie(nearest.object, nearest.avatar_triangle, nearest.object_triangle);
+            }
+            if (better) {
+                have = true;
+                best_sq = h.squared_distance;
+                nearest = to_hit(object, h);
+            }
+        };
+        for (const auto& o : snap->overlay) {
+            std::uint32_t object = 0;
+            auto hit =
+                test(0, o.piece.get(), std::numeric_limits<double>::infinity(), true, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            consider(object, *hit);
+        }
+        for (int round = 0;; ++round) {
+            std::vector<std::uint32_t> near;
+            m_view->index().within(box, radius, slack, near);
+            std::vector<std::pair<double, std::uint32_t>> order;
+            for (auto p : near) {
+                if (tested.insert(p).second && snap->masked[pieces[p].object] == 0) {
+                    order.emplace_back(box_squared_distance(pieces[p].box, box), p);
+                }
+            }
+            std::sort(order.begin(), order.end());
+            for (const auto& [box_sq, p] : order) {
+                if (have && box_sq > cull_threshold_sq(best_sq, slack)) {
+                    break;
+                }
+                if (stopped()) {
+                    return Status{StatusCode::cancelled, "avatar query cancelled"};
+                }
+                std::uint32_t object = 0;
+                const double bound = have ? std::nextafter(best_sq, INFINITY)
+                                          : std::numeric_limits<double>::infinity();
+                auto hit = test(p, nullptr, bound, true, object);
+                if (!hit.ok()) {
+                    return hit.status();
+                }
+                consider(object, *hit);
+            }
+            // Done when the best lies within the searched radius (every piece outside it is
+            // farther), or when every piece has been searched.
+            if ((have && best_sq <= radius * radius) || tested.size() >= pieces.size()) {
+                break;
+            }
+            radius = std::max(radius * 4.0, 1e-9 + (have ? std::sqrt(best_sq) : 0.0));
+        }
+        if (have) {
+            nearest.distance = std::sqrt(best_sq);
+            result.nearest = nearest;
+            m_previous_nearest = nearest.distance;
+        }
+    }
+
+    // 3. Prefetch along the velocity: the box swept over the next poses, grown by the tolerance.
+    if (m_has_previous && options.prefetch_poses > 0.0) {
+        const Vec3 velocity = box.center() - m_previous_box.center();
+        Aabb ahead = box;
+        ahead.extend(Aabb{box.lo + velocity * options.prefetch_poses,
+                          box.hi + velocity * options.prefetch_poses});
+        std::vector<std::uint32_t> near;
+        m_view->index().within(ahead, options.tolerance, slack, near);
+        std::vector<std::uint32_t> hints;
+        for (auto p : near) {
+            if (snap->masked[pieces[p].object] == 0 && !cache.resident(*store, p)) {
+                hints.push_back(p);
+            }
+        }
+        result.prefetch_hints = hints.size();
+        cache.prefetch(store, std::move(hints), m_id + 1);
+    }
+    m_has_previous = true;
+    m_previous_box = box;
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return result;
+}
+
+}  // namespace proxima::massive
