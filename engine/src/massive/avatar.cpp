@@ -203,6 +203,7 @@ StatusOr<std::unique_ptr<AvatarTracker>> AvatarTracker::create(std::shared_ptr<M
     std::unique_ptr<AvatarTracker> t(new AvatarTracker());
     t->m_view = std::move(view);
     t->m_mesh = std::move(avatar);
+    t->m_tree = std::make_unique<LazyBvh>(t->m_mesh.vertices, t->m_mesh.triangles);
     t->m_id = id;
     return t;
 }
@@ -241,7 +242,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         m_posed[v] = pose.apply(m_mesh.vertices[v]);
     }
     const Aabb box = compute_box(m_posed);
-    LazyBvh avatar(m_posed, m_mesh.triangles);
+    const TreeRef avatar{m_tree.get(), nullptr, &pose, m_posed.data()};
     const auto snap = m_view->snapshot();
     const auto& store = m_view->store();
     auto& cache = *m_view->cache();
@@ -265,8 +266,8 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         object = p->object;
         ++result.pieces_tested;
         auto& rp = const_cast<ResidentPiece&>(*p);
-        PairHit hit = closest_pair({&rp.bvh, &rp.geometry.source_triangles}, {&avatar, nullptr},
-                                   bound_sq, slack, ties_avatar_first);
+        PairHit hit = closest_pair({&rp.bvh, &rp.geometry.source_triangles}, avatar, bound_sq,
+                                   slack, ties_avatar_first);
         result.exact_tests += hit.exact_tests;
         return hit;
     };
@@ -342,7 +343,41 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         bool have = false;
         double best_sq = std::numeric_limits<double>::infinity();
         AvatarHit nearest;
+        Seed next_seed;
         std::unordered_set<std::uint32_t> tested;
+        // The previous closest pair at this pose: an upper bound (never a result by itself: the
+        // search below finds it again, or something closer or tied-and-smaller).
+        double seed_sq = std::numeric_limits<double>::infinity();
+        if (m_seed.valid) {
+            PieceHandle handle;
+            const ResidentPiece* p = nullptr;
+            if (m_seed.piece != UINT32_MAX) {
+                if (snap->masked[pieces[m_seed.piece].object] == 0) {
+                    auto h = cache.get(store, m_seed.piece);
+                    if (h.ok()) {
+                        handle = *h;
+                        p = handle.get();
+                    }
+                }
+            } else {
+                for (const auto& o : snap->overlay) {
+                    if (o.object == m_seed.object) {
+                        p = o.piece.get();
+                    }
+                }
+            }
+            if (p != nullptr && m_seed.local < p->geometry.triangles.size()) {
+                const auto& t = m_mesh.triangles[m_seed.avatar];
+                const Triangle y{m_posed[t[0]], m_posed[t[1]], m_posed[t[2]]};
+                seed_sq = triangle_triangle(p->bvh.corners(m_seed.local), y).squared_distance;
+                radius = std::max(radius, std::sqrt(seed_sq));
+            }
+        }
+        auto bound_now = [&] {
+            const double b = have ? best_sq : seed_sq;
+            return std::isfinite(b) ? std::nextafter(b, INFINITY) : b;
+        };
+        std::uint32_t current_piece = 0;
         auto consider = [&](std::uint32_t object, const PairHit& h) {
             if (!h.found) {
                 return;
@@ -356,15 +391,16 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
                 have = true;
                 best_sq = h.squared_distance;
                 nearest = to_hit(object, h);
+                next_seed = {true, current_piece, object, h.local_a, h.local_b};
             }
         };
         for (const auto& o : snap->overlay) {
             std::uint32_t object = 0;
-            auto hit =
-                test(0, o.piece.get(), std::numeric_limits<double>::infinity(), true, object);
+            auto hit = test(0, o.piece.get(), bound_now(), true, object);
             if (!hit.ok()) {
                 return hit.status();
             }
+            current_piece = UINT32_MAX;
             consider(object, *hit);
         }
         for (int round = 0;; ++round) {
@@ -378,19 +414,18 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             }
             std::sort(order.begin(), order.end());
             for (const auto& [box_sq, p] : order) {
-                if (have && box_sq > cull_threshold_sq(best_sq, slack)) {
+                if (box_sq > cull_threshold_sq(have ? best_sq : seed_sq, slack)) {
                     break;
                 }
                 if (stopped()) {
                     return Status{StatusCode::cancelled, "avatar query cancelled"};
                 }
                 std::uint32_t object = 0;
-                const double bound = have ? std::nextafter(best_sq, INFINITY)
-                                          : std::numeric_limits<double>::infinity();
-                auto hit = test(p, nullptr, bound, true, object);
+                auto hit = test(p, nullptr, bound_now(), true, object);
                 if (!hit.ok()) {
                     return hit.status();
                 }
+                current_piece = p;
                 consider(object, *hit);
             }
             // Done when the best lies within the searched radius (every piece outside it is
@@ -405,16 +440,20 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             result.nearest = nearest;
             m_previous_nearest = nearest.distance;
         }
+        m_seed = next_seed;
     }
 
-    // 3. Prefetch along the velocity: the box swept over the next poses, grown by the tolerance.
+    // 3. Prefetch along the velocity: the box swept over the next poses.
     if (m_has_previous && options.prefetch_poses > 0.0) {
         const Vec3 velocity = box.center() - m_previous_box.center();
         Aabb ahead = box;
         ahead.extend(Aabb{box.lo + velocity * options.prefetch_poses,
                           box.hi + velocity * options.prefetch_poses});
         std::vector<std::uint32_t> near;
-        m_view->index().within(ahead, options.tolerance, slack, near);
+        // Grown by the nearest distance too: the next poses' nearest search reads that far.
+        const double reach =
+            std::max(options.tolerance, result.nearest ? result.nearest->distance : 0.0);
+        m_view->index().within(ahead, reach, slack, near);
         std::vector<std::uint32_t> hints;
         for (auto p : near) {
             if (snap->masked[pieces[p].object] == 0 && !cache.resident(*store, p)) {

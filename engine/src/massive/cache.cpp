@@ -127,6 +127,33 @@ std::uint64_t ResidentPiece::geometry_bytes() const {
 
 namespace {
 
+// The box of a node of `t`: its own, or under the avatar's pose the box of its mapped box
+// (centre mapped, half-extent through |A|), grown by a few ulps of the result so rounding never
+// makes it smaller than the posed triangles it holds.
+Aabb node_box(const TreeRef& t, const LazyBvh::Node& n) {
+    if (t.pose == nullptr) {
+        return n.box;
+    }
+    const auto& m = t.pose->m;
+    const Vec3 c = t.pose->apply(n.box.center());
+    const Vec3 h = 0.5 * n.box.extent();
+    Vec3 e{std::abs(m[0]) * h.x + std::abs(m[1]) * h.y + std::abs(m[2]) * h.z,
+           std::abs(m[4]) * h.x + std::abs(m[5]) * h.y + std::abs(m[6]) * h.z,
+           std::abs(m[8]) * h.x + std::abs(m[9]) * h.y + std::abs(m[10]) * h.z};
+    const double scale = std::max({std::abs(c.x), std::abs(c.y), std::abs(c.z), e.x, e.y, e.z});
+    const double grow = 1e-14 * scale;
+    e = e + Vec3{grow, grow, grow};
+    return {c - e, c + e};
+}
+
+Triangle tree_corners(const TreeRef& t, std::uint32_t tri) {
+    if (t.posed == nullptr) {
+        return t.bvh->corners(tri);
+    }
+    const auto& idx = t.bvh->indices(tri);
+    return {t.posed[idx[0]], t.posed[idx[1]], t.posed[idx[2]]};
+}
+
 struct PairSearch {
     TreeRef a;
     TreeRef b;
@@ -145,11 +172,19 @@ struct PairSearch {
     void leaves(const LazyBvh::Node& na, const LazyBvh::Node& nb) {
         for (std::uint32_t i = na.first; i < na.first + na.count; ++i) {
             const std::uint32_t ta = a.bvh->triangle(i);
-            const Triangle x = a.bvh->corners(ta);
+            const Triangle x = tree_corners(a, ta);
             for (std::uint32_t j = nb.first; j < nb.first + nb.count; ++j) {
                 const std::uint32_t tb = b.bvh->triangle(j);
+                const Triangle y = tree_corners(b, tb);
+                // The triangles' boxes first (a lower bound up to rounding, which the widened
+                // threshold covers): a pair beyond it can be neither closer nor tied.
+                const double t = threshold();
+                if (std::isfinite(t) && box_squared_distance(triangle_box(x[0], x[1], x[2]),
+                                                             triangle_box(y[0], y[1], y[2])) > t) {
+                    continue;
+                }
                 ++hit.exact_tests;
-                const auto cp = triangle_triangle(x, b.bvh->corners(tb));
+                const auto cp = triangle_triangle(x, y);
                 if (cp.squared_distance > bound_sq) {
                     continue;
                 }
@@ -166,14 +201,16 @@ struct PairSearch {
                     hit.squared_distance = cp.squared_distance;
                     hit.triangle_a = sa;
                     hit.triangle_b = sb;
+                    hit.local_a = ta;
+                    hit.local_b = tb;
                     hit.point_a = cp.point_a;
                     hit.point_b = cp.point_b;
                 }
             }
         }
     }
-    void visit(const LazyBvh::Node& na, const LazyBvh::Node& nb) {
-        if (box_squared_distance(na.box, nb.box) > threshold()) {
+    void visit(const LazyBvh::Node& na, const Aabb& ba, const LazyBvh::Node& nb, const Aabb& bb) {
+        if (box_squared_distance(ba, bb) > threshold()) {
             return;
         }
         const bool la = na.leaf();
@@ -185,22 +222,24 @@ struct PairSearch {
         // Descend the larger node (by triangle count), nearer child first.
         if (lb || (!la && na.count >= nb.count)) {
             auto [c0, c1] = a.bvh->children(na);
-            const double d0 = box_squared_distance(c0->box, nb.box);
-            const double d1 = box_squared_distance(c1->box, nb.box);
-            if (d1 < d0) {
+            Aabb b0 = node_box(a, *c0);
+            Aabb b1 = node_box(a, *c1);
+            if (box_squared_distance(b1, bb) < box_squared_distance(b0, bb)) {
                 std::swap(c0, c1);
+                std::swap(b0, b1);
             }
-            visit(*c0, nb);
-            visit(*c1, nb);
+            visit(*c0, b0, nb, bb);
+            visit(*c1, b1, nb, bb);
         } else {
             auto [c0, c1] = b.bvh->children(nb);
-            const double d0 = box_squared_distance(na.box, c0->box);
-            const double d1 = box_squared_distance(na.box, c1->box);
-            if (d1 < d0) {
+            Aabb b0 = node_box(b, *c0);
+            Aabb b1 = node_box(b, *c1);
+            if (box_squared_distance(ba, b1) < box_squared_distance(ba, b0)) {
                 std::swap(c0, c1);
+                std::swap(b0, b1);
             }
-            visit(na, *c0);
-            visit(na, *c1);
+            visit(na, ba, *c0, b0);
+            visit(na, ba, *c1, b1);
         }
     }
 };
@@ -210,7 +249,8 @@ struct PairSearch {
 PairHit closest_pair(TreeRef a, TreeRef b, double bound_sq, double slack, bool ties_b_first) {
     PairSearch s{a, b, bound_sq, slack, ties_b_first, {}};
     if (a.bvh->root().count > 0 && b.bvh->root().count > 0) {
-        s.visit(a.bvh->root(), b.bvh->root());
+        s.visit(a.bvh->root(), node_box(a, a.bvh->root()), b.bvh->root(),
+                node_box(b, b.bvh->root()));
     }
     return s.hit;
 }

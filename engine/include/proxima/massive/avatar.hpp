@@ -129,10 +129,20 @@ class AvatarTracker {
     std::shared_ptr<ModelView> m_view;
     TriangleMesh m_mesh;
     std::vector<Vec3> m_posed;
+    std::unique_ptr<LazyBvh> m_tree;  // on the avatar's own coordinates, built once, lazily
     std::uint64_t m_id = 0;
     bool m_has_previous = false;
     Aabb m_previous_box;
     double m_previous_nearest = 0.0;
+    // The previous pose's closest pair: re-evaluated first at the next pose, it gives the nearest
+    // search a tight upper bound from the start (temporal coherence).
+    struct Seed {
+        bool valid = false;
+        std::uint32_t piece = 0;  // UINT32_MAX: an overlay object
+        std::uint32_t object = 0;
+        std::uint32_t local = 0;   // triangle of the piece (tree index)
+        std::uint32_t avatar = 0;  // avatar triangle
+    } m_seed;
 };
 
 }  // namespace proxima::massive

@@ -48,6 +48,7 @@ class LazyBvh {
     // The children of an inner node, built on first call.
     std::pair<const Node*, const Node*> children(const Node& n);
     std::uint32_t triangle(std::uint32_t slot) const { return m_order[slot]; }
+    const TriangleIndices& indices(std::uint32_t t) const { return m_triangles[t]; }
     Triangle corners(std::uint32_t t) const {
         const auto& tri = m_triangles[t];
         return {m_vertices[tri[0]], m_vertices[tri[1]], m_vertices[tri[2]]};
@@ -168,13 +169,20 @@ struct PairHit {
     double squared_distance = std::numeric_limits<double>::infinity();
     std::uint32_t triangle_a = 0;  // source triangle indices (object numbering)
     std::uint32_t triangle_b = 0;
+    std::uint32_t local_a = 0;  // the same triangles as indices of the trees
+    std::uint32_t local_b = 0;
     Vec3 point_a;
     Vec3 point_b;
     std::uint64_t exact_tests = 0;
 };
 struct TreeRef {
     LazyBvh* bvh;
-    const std::vector<std::uint32_t>* source;  // maps tree triangle -> reported index; null: same
+    const std::vector<std::uint32_t>* source = nullptr;  // tree triangle -> reported; null: same
+    // A rigid avatar: the tree is built once on its own coordinates and searched under `pose`
+    // (node boxes mapped conservatively, exact tests on `posed`, the posed vertices, indexed
+    // like the tree's).
+    const Affine* pose = nullptr;
+    const Vec3* posed = nullptr;
 };
 // `ties_b_first`: break ties by (triangle_b, triangle_a) instead (the engine's separation order
 // when b is the object asking).

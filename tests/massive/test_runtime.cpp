@@ -1,0 +1,459 @@
+// The massive-model runtime against references: lazy hierarchies against all triangle pairs,
+// static verification against the brute-force (everything in memory) reference, avatar queries
+// against the in-memory engine, the cache's budget, pins and corruption handling.
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+
+#include "proxima/distance/bounds.hpp"
+#include "proxima/massive/avatar.hpp"
+#include "proxima/massive/generator.hpp"
+#include "proxima/massive/verify.hpp"
+#include "proxima/query/query.hpp"
+
+namespace fs = std::filesystem;
+using namespace proxima;
+using namespace proxima::massive;
+
+namespace {
+
+fs::path temp_dir(const std::string& name) {
+    auto p =
+        fs::temp_directory_path() / ("proxima-runtime-" + name + "-" + std::to_string(::getpid()));
+    fs::remove_all(p);
+    fs::create_directories(p);
+    return p;
+}
+
+// A closed box mesh, optionally rotated about z.
+TriangleMesh box_mesh(Vec3 lo, Vec3 hi, double angle = 0.0) {
+    TriangleMesh m;
+    const Vec3 c = 0.5 * (lo + hi);
+    for (int i = 0; i < 8; ++i) {
+        Vec3 p{(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z};
+        const double x = p.x - c.x;
+        const double y = p.y - c.y;
+        p.x = c.x + std::cos(angle) * x - std::sin(angle) * y;
+        p.y = c.y + std::sin(angle) * x + std::cos(angle) * y;
+        m.vertices.push_back(p);
+    }
+    m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                   {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+    return m;
+}
+
+// A UV sphere with `n` segments (2 n (n - 1) triangles).
+TriangleMesh sphere_mesh(Vec3 c, double r, int n) {
+    TriangleMesh m;
+    m.vertices.push_back(c + Vec3{0, 0, r});
+    for (int i = 1; i < n; ++i) {
+        const double th = M_PI * i / n;
+        for (int j = 0; j < 2 * n; ++j) {
+            const double ph = M_PI * j / n;
+            m.vertices.push_back(c + Vec3{r * std::sin(th) * std::cos(ph),
+                                          r * std::sin(th) * std::sin(ph), r * std::cos(th)});
+        }
+    }
+    m.vertices.push_back(c + Vec3{0, 0, -r});
+    const auto ring = [&](int i, int j) {
+        return static_cast<std::uint32_t>(1 + (i - 1) * 2 * n + (j % (2 * n)));
+    };
+    const auto bottom = static_cast<std::uint32_t>(m.vertices.size() - 1);
+    for (int j = 0; j < 2 * n; ++j) {
+        m.triangles.push_back({0, ring(1, j), ring(1, j + 1)});
+        for (int i = 1; i + 1 < n; ++i) {
+            m.triangles.push_back({ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
+            m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
+        }
+        m.triangles.push_back({ring(n - 1, j), bottom, ring(n - 1, j + 1)});
+    }
+    return m;
+}
+
+// Imports a plant of about `triangles` triangles; pieces at most `max_piece_bytes`.
+std::shared_ptr<const Store> plant_store(const fs::path& dir, std::uint64_t triangles,
+                                         std::uint64_t max_piece_bytes) {
+    StoreOptions options;
+    options.max_piece_bytes = max_piece_bytes;
+    auto writer = StoreWriter::create(dir.string(), options);
+    EXPECT_TRUE(writer.ok()) << writer.status().to_string();
+    PlantOptions plant;
+    plant.triangles = triangles;
+    auto summary =
+        generate_plant(plant, [&](ModelObject&& o) { return (*writer)->add(std::move(o)); });
+    EXPECT_TRUE(summary.ok()) << summary.status().to_string();
+    auto committed = (*writer)->commit();
+    EXPECT_TRUE(committed.ok()) << committed.status().to_string();
+    auto store = Store::open(dir.string());
+    EXPECT_TRUE(store.ok()) << store.status().to_string();
+    return *store;
+}
+
+void expect_same_pairs(const std::vector<ObjectPairResult>& got,
+                       const std::vector<ObjectPairResult>& want) {
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        SCOPED_TRACE("pair " + std::to_string(k));
+        EXPECT_EQ(got[k].object_a, want[k].object_a);
+        EXPECT_EQ(got[k].object_b, want[k].object_b);
+        // Bit for bit: the same exact tests on the same coordinates.
+        EXPECT_EQ(got[k].distance, want[k].distance);
+        EXPECT_EQ(got[k].triangle_a, want[k].triangle_a);
+        EXPECT_EQ(got[k].triangle_b, want[k].triangle_b);
+        EXPECT_EQ(got[k].point_a, want[k].point_a);
+        EXPECT_EQ(got[k].point_b, want[k].point_b);
+    }
+}
+
+}  // namespace
+
+// closest_pair against every triangle pair, with the canonical tie-break, on random soups whose
+// hierarchies are expanded lazily (and concurrently: both trees are shared by two searches).
+TEST(LazyBvh, ClosestPairEqualsAllPairs) {
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int round = 0; round < 40; ++round) {
+        TriangleMesh a;
+        TriangleMesh b;
+        const int na = 20 + round * 7;
+        const int nb = 15 + round * 5;
+        const Vec3 offset{round % 3 == 0 ? 0.0 : 1.5 + 0.1 * round, 0.0, 0.0};
+        for (int k = 0; k < na; ++k) {
+            const Vec3 c{u(rng), u(rng), u(rng)};
+            for (int v = 0; v < 3; ++v) {
+                a.vertices.push_back(c + 0.2 * Vec3{u(rng), u(rng), u(rng)});
+            }
+            a.triangles.push_back(
+                {std::uint32_t(3 * k), std::uint32_t(3 * k + 1), std::uint32_t(3 * k + 2)});
+        }
+        // Shared vertices in b (a strip), some coordinates snapped to a grid to make ties.
+        for (int k = 0; k < nb + 2; ++k) {
+            Vec3 p = offset + Vec3{u(rng), u(rng), u(rng)};
+            if (k % 4 == 0) {
+                p = {std::round(p.x * 4) / 4, std::round(p.y * 4) / 4, std::round(p.z * 4) / 4};
+            }
+            b.vertices.push_back(p);
+        }
+        for (int k = 0; k < nb; ++k) {
+            b.triangles.push_back({std::uint32_t(k), std::uint32_t(k + 1), std::uint32_t(k + 2)});
+        }
+        LazyBvh ta(a.vertices, a.triangles);
+        LazyBvh tb(b.vertices, b.triangles);
+        for (double bound : {std::numeric_limits<double>::infinity(), 0.0, 0.01, 0.3}) {
+            const double bound_sq = bound * bound;
+            bool found = false;
+            double best = 0;
+            std::uint32_t bi = 0;
+            std::uint32_t bj = 0;
+            for (std::uint32_t i = 0; i < a.triangles.size(); ++i) {
+                for (std::uint32_t j = 0; j < b.triangles.size(); ++j) {
+                    const auto cp = triangle_triangle(ta.corners(i), tb.corners(j));
+                    if (cp.squared_distance > bound_sq) {
+                        continue;
+                    }
+                    if (!found || cp.squared_distance < best ||
+                        (cp.squared_distance == best && std::tie(i, j) < std::tie(bi, bj))) {
+                        found = true;
+                        best = cp.squared_distance;
+                        bi = i;
+                        bj = j;
+                    }
+                }
+            }
+            const double slack = rounding_slack(4.0);
+            const PairHit hit = closest_pair({&ta, nullptr}, {&tb, nullptr}, bound_sq, slack);
+            ASSERT_EQ(hit.found, found) << "round " << round << " bound " << bound;
+            if (found) {
+                EXPECT_EQ(hit.squared_distance, best);
+                EXPECT_EQ(hit.triangle_a, bi);
+                EXPECT_EQ(hit.triangle_b, bj);
+            }
+        }
+        // Lazy: a far-apart search builds few nodes.
+        EXPECT_LE(ta.nodes_built(), 2 * a.triangles.size() + 2);
+    }
+}
+
+TEST(LazyBvh, ExpandsOnlyWhatIsVisited) {
+    const TriangleMesh big = sphere_mesh({0, 0, 0}, 1.0, 64);  // 8,064 triangles
+    const TriangleMesh probe = box_mesh({1.05, -0.01, -0.01}, {1.07, 0.01, 0.01});
+    LazyBvh tb(big.vertices, big.triangles);
+    LazyBvh tp(probe.vertices, probe.triangles);
+    const auto hit = closest_pair({&tb, nullptr}, {&tp, nullptr},
+                                  std::numeric_limits<double>::infinity(), rounding_slack(2.0));
+    ASSERT_TRUE(hit.found);
+    EXPECT_NEAR(std::sqrt(hit.squared_distance), 0.05, 1e-3);
+    // A local query touches a small part of the tree (a full tree has ~4,000 nodes).
+    EXPECT_LT(tb.nodes_built(), 600u) << "nodes built: " << tb.nodes_built();
+}
+
+TEST(GeometryCache, StaysUnderBudgetKeepsPinsAndNeverCachesCorruption) {
+    const auto dir = temp_dir("cache");
+    {
+        auto writer = StoreWriter::create(dir.string(), {});
+        ASSERT_TRUE(writer.ok());
+        for (int k = 0; k < 40; ++k) {
+            ASSERT_TRUE(
+                (*writer)
+                    ->add({"sphere-" + std::to_string(k), sphere_mesh({3.0 * k, 0, 0}, 1.0, 24)})
+                    .ok());
+        }
+        ASSERT_TRUE((*writer)->commit().ok());
+    }
+    std::shared_ptr<const Store> store = *Store::open(dir.string());
+    const auto piece_bytes = store->pieces()[0].weight();
+    GeometryCache cache(6 * piece_bytes);
+    {
+        auto pinned = cache.get(store, 0);
+        ASSERT_TRUE(pinned.ok());
+        for (std::uint32_t p = 1; p < 40; ++p) {
+            auto h = cache.get(store, p);
+            ASSERT_TRUE(h.ok());
+            LazyBvh& t = (*h)->bvh;
+            (void)t.children(t.root());
+        }
+        EXPECT_TRUE(cache.resident(*store, 0)) << "a pinned piece was evicted";
+        const auto s = cache.stats();
+        EXPECT_LE(s.resident_bytes, static_cast<std::int64_t>(cache.budget()));
+        EXPECT_GT(s.evictions, 0u);
+        EXPECT_EQ(s.loads, 40u);
+        EXPECT_EQ(s.triangles_loaded, 40u * store->pieces()[0].triangle_count);
+    }
+    // Prefetch: hinted pieces become resident without a get.
+    cache.clear();
+    cache.prefetch(store, {30, 31, 32});
+    for (int i = 0; i < 200 && !cache.resident(*store, 32); ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    EXPECT_TRUE(cache.resident(*store, 30));
+    EXPECT_TRUE(cache.resident(*store, 32));
+    EXPECT_GE(cache.stats().prefetch_loads, 3u);
+
+    // Corrupt the chunk of piece 35: DATA_LOSS, every time (not cached), others still served.
+    cache.clear();
+    const auto& info = store->pieces()[35];
+    bool flipped = false;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+        if (e.is_regular_file() && e.path().filename().string().rfind("chunks", 0) == 0) {
+            std::fstream f(e.path(), std::ios::in | std::ios::out | std::ios::binary);
+            f.seekg(static_cast<std::streamoff>(info.offset + info.bytes / 2));
+            char c = 0;
+            f.read(&c, 1);
+            c = static_cast<char>(c ^ 0x10);
+            f.seekp(static_cast<std::streamoff>(info.offset + info.bytes / 2));
+            f.write(&c, 1);
+            flipped = true;
+            break;
+        }
+    }
+    ASSERT_TRUE(flipped) << "no chunk file found in " << dir;
+    std::shared_ptr<const Store> reopened = *Store::open(dir.string());
+    for (int k = 0; k < 2; ++k) {
+        auto bad = cache.get(reopened, 35);
+        ASSERT_FALSE(bad.ok());
+        EXPECT_EQ(bad.status().code(), StatusCode::data_loss) << bad.status().to_string();
+    }
+    EXPECT_TRUE(cache.get(reopened, 0).ok());
+    fs::remove_all(dir);
+}
+
+// The acceptance check of static verification: a generated plant of >= 1M triangles, pieces
+// split small, a cache a fraction of the model: verify_static equals the all-in-memory brute
+// force exactly, for collisions (tolerance 0) and a tolerance.
+TEST(StaticVerification, MillionTrianglePlantEqualsBruteForce) {
+    const auto dir = temp_dir("plant1m");
+    auto store = plant_store(dir, 1'050'000, 2ull << 20);
+    ASSERT_GE(store->summary().triangles, 1'000'000u);
+    std::uint64_t model_bytes = 0;
+    for (const auto& p : store->pieces()) {
+        model_bytes += p.weight();
+    }
+    EXPECT_GT(store->summary().split_objects, 0u) << "no object was split: splitting untested";
+    for (double tolerance : {0.0, 0.02}) {
+        SCOPED_TRACE("tolerance " + std::to_string(tolerance));
+        auto want = verify_brute_force(*store, tolerance);
+        ASSERT_TRUE(want.ok()) << want.status().to_string();
+        std::sort(want->begin(), want->end(), [](const auto& x, const auto& y) {
+            return std::tie(x.object_a, x.object_b) < std::tie(y.object_a, y.object_b);
+        });
+        GeometryCache cache(model_bytes / 5);
+        std::vector<ObjectPairResult> got;
+        std::size_t streamed = 0;
+        auto stats = verify_static(
+            store, cache, {tolerance, 0.25, true}, [&](const ObjectPairResult&) { ++streamed; },
+            &got);
+        ASSERT_TRUE(stats.ok()) << stats.status().to_string();
+        EXPECT_EQ(streamed, got.size());
+        EXPECT_GT(got.size(), 20u) << "the plant should have touching / near objects";
+        expect_same_pairs(got, *want);
+        EXPECT_GT(stats->cache.evictions, 0u) << "the cache should have been too small to hold all";
+        std::printf(
+            "tolerance %g: %zu pairs, %llu piece pairs, %.2f triangles loaded per "
+            "triangle, %.2f s, peak %.1f MB of budget %.1f MB\n",
+            tolerance, got.size(), static_cast<unsigned long long>(stats->edges),
+            double(stats->cache.triangles_loaded) / double(stats->model_triangles), stats->seconds,
+            stats->cache.peak_bytes / 1e6, cache.budget() / 1e6);
+        // A second run reads the persisted schedule.
+        auto again = verify_static(store, cache, {tolerance, 0.25, true}, {}, &got);
+        ASSERT_TRUE(again.ok());
+        EXPECT_TRUE(again->schedule_from_store);
+        expect_same_pairs(got, *want);
+    }
+    fs::remove_all(dir);
+}
+
+TEST(StaticVerification, CancelledAndBadTolerance) {
+    const auto dir = temp_dir("cancel");
+    auto store = plant_store(dir, 60'000, 1ull << 20);
+    GeometryCache cache(64ull << 20);
+    CancelToken cancel;
+    cancel.cancel();
+    auto r = verify_static(store, cache, {0.0}, {}, nullptr, {}, &cancel);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::cancelled);
+    auto bad = verify_static(store, cache, {-1.0}, {});
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.status().code(), StatusCode::invalid_argument);
+    fs::remove_all(dir);
+}
+
+namespace {
+
+// The in-memory engine on the same objects (the view's edits applied), the avatar last.
+struct EngineReference {
+    ProximityEngine engine;
+    std::vector<std::uint32_t> model_object;  // scene index -> model object index
+};
+
+void check_against_engine(const ModelView& view, const std::vector<TriangleMesh>& objects,
+                          const TriangleMesh& avatar_posed, const AvatarResult& got,
+                          double tolerance, const std::string& where) {
+    SCOPED_TRACE(where);
+    EngineReference ref;
+    for (std::uint32_t o = 0; o < objects.size(); ++o) {
+        if (objects[o].triangles.empty()) {
+            continue;  // deleted
+        }
+        ASSERT_TRUE(ref.engine.scene().add_object({"o" + std::to_string(o), objects[o]}).ok());
+        ref.model_object.push_back(o);
+    }
+    ASSERT_TRUE(ref.engine.scene().add_object({"avatar", avatar_posed}).ok());
+    const auto avatar_index = static_cast<std::uint32_t>(ref.model_object.size());
+    QueryRequest request;
+    request.separation = true;
+    request.tolerance = tolerance;
+    auto r = ref.engine.query(request);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    // Within: per object, the engine's pairs with the avatar.
+    std::map<std::uint32_t, double> want;
+    std::map<std::pair<std::uint32_t, std::pair<std::uint32_t, std::uint32_t>>, double> pairs;
+    for (const auto& p : r->tolerance) {
+        if (p.other != avatar_index || p.object == avatar_index) {
+            continue;
+        }
+        const auto o = ref.model_object[p.object];
+        auto it = want.find(o);
+        if (it == want.end() || p.distance < it->second) {
+            want[o] = p.distance;
+        }
+        pairs[{o, {p.triangle, p.other_triangle}}] = p.distance;
+    }
+    ASSERT_EQ(got.within.size(), want.size());
+    for (const auto& h : got.within) {
+        ASSERT_TRUE(want.count(h.object)) << "object " << h.object;
+        EXPECT_EQ(h.distance, want[h.object]) << "object " << h.object;
+        auto it = pairs.find({h.object, {h.object_triangle, h.avatar_triangle}});
+        ASSERT_NE(it, pairs.end()) << "reported triangles not a pair of the engine's";
+        EXPECT_EQ(it->second, h.distance);
+    }
+    const auto& sep = r->separation[avatar_index];
+    ASSERT_EQ(got.nearest.has_value(), sep.other != NO_OBJECT);
+    if (got.nearest) {
+        EXPECT_EQ(got.nearest->distance, sep.distance);
+        EXPECT_EQ(got.nearest->object, ref.model_object[sep.other]);
+    }
+}
+
+}  // namespace
+
+TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
+    const auto dir = temp_dir("avatar");
+    auto store = plant_store(dir, 40'000, 256ull << 10);
+    auto cache = std::make_shared<GeometryCache>(8ull << 20);
+    auto view = std::make_shared<ModelView>(store, cache);
+    std::vector<TriangleMesh> objects;
+    for (std::uint32_t o = 0; o < store->objects().size(); ++o) {
+        objects.push_back(*read_object(*store, o));
+    }
+    const TriangleMesh avatar = sphere_mesh({0, 0, 0}, 0.6, 12);
+    auto tracker = AvatarTracker::create(view, avatar, 1);
+    ASSERT_TRUE(tracker.ok());
+    // A path through the plant's box, from one corner region to the other.
+    Aabb box;
+    for (const auto& o : store->objects()) {
+        box.extend(o.box);
+    }
+    const int poses = 12;
+    std::uint64_t collisions = 0;
+    double avatar_seconds = 0;
+    for (int k = 0; k < poses; ++k) {
+        if (k == 6) {
+            // Edits: move object 0 next to the path, delete object 1, add a box on the path.
+            const Vec3 at = box.lo + (box.hi - box.lo) * (double(k) / poses);
+            Affine move;
+            move.m[3] = 0.3;
+            ASSERT_TRUE(view->move_object(0, move).ok());
+            for (auto& v : objects[0].vertices) {
+                v = move.apply(v);
+            }
+            ASSERT_TRUE(view->delete_object(1).ok());
+            objects[1] = {};
+            auto added = view->add_object({"added", box_mesh(at, at + Vec3{1, 1, 1})});
+            ASSERT_TRUE(added.ok());
+            EXPECT_EQ(*added, objects.size());
+            objects.push_back(box_mesh(at, at + Vec3{1, 1, 1}));
+            EXPECT_FALSE(view->delete_object(1).ok()) << "deleting twice must fail";
+            Affine bad;
+            bad.m[0] = std::nan("");
+            EXPECT_FALSE(view->move_object(2, bad).ok());
+        }
+        const Vec3 at = box.lo + (box.hi - box.lo) * (double(k) / (poses - 1));
+        Affine pose;
+        pose.m = {std::cos(0.1 * k),
+                  -std::sin(0.1 * k),
+                  0,
+                  at.x,
+                  std::sin(0.1 * k),
+                  std::cos(0.1 * k),
+                  0,
+                  at.y,
+                  0,
+                  0,
+                  1,
+                  at.z};
+        for (double tolerance : {0.0, 0.25}) {
+            const auto t0 = std::chrono::steady_clock::now();
+            auto r = (*tracker)->query(pose, {tolerance, true, 4.0});
+            avatar_seconds +=
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+            ASSERT_TRUE(r.ok()) << r.status().to_string();
+            collisions += r->collisions.size();
+            TriangleMesh posed = avatar;
+            posed.vertices = (*tracker)->posed_vertices();
+            check_against_engine(
+                *view, objects, posed, *r, tolerance,
+                "pose " + std::to_string(k) + " tolerance " + std::to_string(tolerance));
+        }
+    }
+    EXPECT_GT(collisions, 0u) << "the path should hit something";
+    std::printf("%llu objects, %d poses: avatar queries %.3f s in all\n",
+                static_cast<unsigned long long>(store->objects().size()), poses, avatar_seconds);
+    fs::remove_all(dir);
+}
