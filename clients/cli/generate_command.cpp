@@ -1,0 +1,304 @@
+// proxima generate: the deterministic test models of the massive-model path as files.
+//   proxima generate plant --triangles 15M --seed 1 --out DIR
+//     every object of the procedural plant as DIR/meshes/<object name>.ply (binary PLY with
+//     double coordinates: exact, and about 4x smaller and 20x faster to write than OFF text),
+//     listed in DIR/scene.json (format proxima-scene/1, no transforms);
+//   proxima generate building --furniture DIR --triangles 2M --seed 1 --out DIR
+//     the furnished building (engine: generate_building).
+// Both print a one-line JSON summary on standard output, progress on standard error.
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <system_error>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.hpp"
+#include "common/progress.hpp"
+#include "proxima/io/mesh_io.hpp"
+#include "proxima/massive/generator.hpp"
+
+namespace proxima::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+int fail(const Status& status) {
+    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
+    return 1;
+}
+
+struct GenerateArgs {
+    std::string triangles;
+    std::uint64_t seed = 1;
+    std::string out;
+    std::string furniture;
+    bool verify = false;
+    bool quiet = false;
+};
+
+// "15M" -> 15,000,000; "2.5M", "10K", "1G", "300000" too.
+StatusOr<std::uint64_t> parse_count(const std::string& text) {
+    auto bad = [&] {
+        return invalid_argument("--triangles '" + text +
+                                "': expected a positive number with an optional K, M or G suffix");
+    };
+    std::size_t used = 0;
+    double value = 0.0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        return bad();
+    }
+    const std::string suffix = text.substr(used);
+    double scale = 1.0;
+    if (suffix == "K" || suffix == "k") {
+        scale = 1e3;
+    } else if (suffix == "M" || suffix == "m") {
+        scale = 1e6;
+    } else if (suffix == "G" || suffix == "g") {
+        scale = 1e9;
+    } else if (!suffix.empty()) {
+        return bad();
+    }
+    const double count = std::round(value * scale);
+    if (!std::isfinite(count) || count < 1.0 || count > 1e12) {
+        return bad();
+    }
+    return static_cast<std::uint64_t>(count);
+}
+
+template <class T>
+void append_le(std::string& out, T value) {
+    auto bits = std::bit_cast<std::array<unsigned char, sizeof(T)>>(value);
+    if constexpr (std::endian::native == std::endian::big) {
+        std::reverse(bits.begin(), bits.end());
+    }
+    out.append(reinterpret_cast<const char*>(bits.data()), bits.size());
+}
+
+// Binary little-endian PLY: double x, y, z; faces as uchar-counted uint lists. proxima's own PLY
+// reader takes it back bit for bit.
+Status write_ply(const std::string& path, const TriangleMesh& mesh, std::string& buffer) {
+    buffer.clear();
+    buffer += "ply\nformat binary_little_endian 1.0\nelement vertex " +
+              std::to_string(mesh.vertices.size()) +
+              "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+              std::to_string(mesh.triangles.size()) +
+              "\nproperty list uchar uint vertex_indices\nend_header\n";
+    buffer.reserve(buffer.size() + mesh.vertices.size() * 24 + mesh.triangles.size() * 13);
+    for (const auto& v : mesh.vertices) {
+        append_le(buffer, v.x);
+        append_le(buffer, v.y);
+        append_le(buffer, v.z);
+    }
+    for (const auto& t : mesh.triangles) {
+        buffer.push_back(3);
+        append_le(buffer, t[0]);
+        append_le(buffer, t[1]);
+        append_le(buffer, t[2]);
+    }
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (f == nullptr) {
+        return Status(StatusCode::unavailable, "cannot create '" + path + "'");
+    }
+    const bool written = std::fwrite(buffer.data(), 1, buffer.size(), f) == buffer.size();
+    const bool closed = std::fclose(f) == 0;
+    return written && closed ? Status{}
+                             : Status(StatusCode::unavailable, "cannot write '" + path + "'");
+}
+
+bool same_mesh(const TriangleMesh& a, const TriangleMesh& b) {
+    if (a.triangles != b.triangles || a.vertices.size() != b.vertices.size()) {
+        return false;
+    }
+    for (std::size_t i = 0; i < a.vertices.size(); ++i) {
+        for (int k = 0; k < 3; ++k) {
+            if (std::bit_cast<std::uint64_t>(a.vertices[i][k]) !=
+                std::bit_cast<std::uint64_t>(b.vertices[i][k])) {
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+nlohmann::ordered_json summary_json(const std::string& model, const massive::GeneratedSummary& s,
+                                    const std::string& scene, double seconds) {
+    const bool empty = s.box.empty();
+    auto point = [&](const Vec3& p) {
+        return empty ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json{p.x, p.y, p.z};
+    };
+    return {{"model", model},
+            {"objects", s.objects},
+            {"triangles", s.triangles},
+            {"vertices", s.vertices},
+            {"box", {{"lo", point(s.box.lo)}, {"hi", point(s.box.hi)}}},
+            {"scene", scene},
+            {"seconds", seconds}};
+}
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+int run_plant(const GenerateArgs& args) {
+    auto triangles = parse_count(args.triangles);
+    if (!triangles.ok()) {
+        return fail(triangles.status());
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const fs::path out(args.out);
+    std::error_code ec;
+    fs::create_directories(out / "meshes", ec);
+    if (ec) {
+        return fail(Status(StatusCode::unavailable,
+                           "cannot create '" + (out / "meshes").string() + "': " + ec.message()));
+    }
+    massive::PlantOptions options;
+    options.triangles = triangles.value();
+    options.seed = args.seed;
+    nlohmann::ordered_json meshes = nlohmann::ordered_json::object();
+    nlohmann::ordered_json objects = nlohmann::ordered_json::array();
+    std::string buffer;
+    fs::path made_dir;
+    client::ProgressPrinter printer(args.quiet);
+    auto generated = massive::generate_plant(
+        options,
+        [&](massive::ModelObject&& object) -> Status {
+            // "bay-0012/pipe-3" -> meshes/bay-0012/pipe-3.ply
+            const std::string file = "meshes/" + object.name + ".ply";
+            const fs::path path = out / file;
+            if (path.parent_path() != made_dir) {
+                std::error_code dir_ec;
+                fs::create_directories(path.parent_path(), dir_ec);
+                if (dir_ec) {
+                    return Status(
+                        StatusCode::unavailable,
+                        "cannot create '" + path.parent_path().string() + "': " + dir_ec.message());
+                }
+                made_dir = path.parent_path();
+            }
+            if (Status s = write_ply(path.string(), object.mesh, buffer); !s.ok()) {
+                return s;
+            }
+            if (args.verify) {
+                auto back = read_mesh(path.string());
+                if (!back.ok()) {
+                    return back.status();
+                }
+                if (!same_mesh(back.value(), object.mesh)) {
+                    return Status(StatusCode::internal,
+                                  "'" + path.string() + "' does not read back bit for bit");
+                }
+            }
+            meshes[object.name] = file;
+            nlohmann::ordered_json part = {{"mesh", object.name}};
+            nlohmann::ordered_json entry = {{"name", object.name}};
+            entry["parts"] = nlohmann::ordered_json::array();
+            entry["parts"].push_back(std::move(part));
+            objects.push_back(std::move(entry));
+            return {};
+        },
+        printer.callback());
+    printer.finish();
+    if (!generated.ok()) {
+        return fail(generated.status());
+    }
+    nlohmann::ordered_json scene;
+    scene["format"] = "proxima-scene/1";
+    scene["meshes"] = std::move(meshes);
+    scene["objects"] = std::move(objects);
+    const std::string scene_file = (out / "scene.json").string();
+    {
+        std::ofstream file(scene_file, std::ios::binary | std::ios::trunc);
+        file << scene.dump(1) << '\n';
+        if (!file.good()) {
+            return fail(Status(StatusCode::unavailable, "cannot write '" + scene_file + "'"));
+        }
+    }
+    std::cout << summary_json("plant", generated.value(), scene_file, seconds_since(start)).dump()
+              << '\n';
+    return 0;
+}
+
+int run_building(const GenerateArgs& args) {
+    auto triangles = parse_count(args.triangles);
+    if (!triangles.ok()) {
+        return fail(triangles.status());
+    }
+    const auto start = std::chrono::steady_clock::now();
+    massive::BuildingOptions options;
+    options.furniture_dir = args.furniture;
+    options.triangles = triangles.value();
+    options.seed = args.seed;
+    client::ProgressPrinter printer(args.quiet);
+    auto generated = massive::generate_building(options, args.out, printer.callback());
+    printer.finish();
+    if (!generated.ok()) {
+        return fail(generated.status());
+    }
+    std::cout << summary_json("building", generated->summary, generated->scene_file,
+                              seconds_since(start))
+                     .dump()
+              << '\n';
+    return 0;
+}
+
+}  // namespace
+
+void add_generate_command(CLI::App& app, int& exit_code) {
+    auto* cmd = app.add_subcommand(
+        "generate", "Write a deterministic test model (procedural plant or furnished building)");
+    cmd->require_subcommand(1);
+
+    auto plant = std::make_shared<GenerateArgs>();
+    plant->triangles = "1M";
+    auto* plant_cmd = cmd->add_subcommand(
+        "plant",
+        "A procedural process plant (frames, tanks, pipe runs, walkways, stairs): one binary PLY "
+        "per object under OUT/meshes and OUT/scene.json");
+    plant_cmd
+        ->add_option("--triangles", plant->triangles,
+                     "Approximate triangle count (within 10%), K/M/G suffixes: 15M")
+        ->capture_default_str();
+    plant_cmd->add_option("--seed", plant->seed, "Seed (same options, same model)")
+        ->capture_default_str();
+    plant_cmd->add_option("--out", plant->out, "Output directory")->required();
+    plant_cmd->add_flag("--verify", plant->verify,
+                        "Read every written mesh back and check it is bit-identical");
+    plant_cmd->add_flag("--quiet", plant->quiet, "No progress on standard error");
+    plant_cmd->callback([plant, &exit_code] { exit_code = run_plant(*plant); });
+
+    auto building = std::make_shared<GenerateArgs>();
+    building->triangles = "2M";
+    auto* building_cmd = cmd->add_subcommand(
+        "building",
+        "A multi-storey building furnished with instances of real furniture meshes: shell meshes "
+        "under OUT/shell and OUT/scene.json referencing the furniture files");
+    building_cmd
+        ->add_option("--furniture", building->furniture,
+                     "Directory of furniture meshes (e.g. ../shared/data/meshes/furniture-cc0)")
+        ->required();
+    building_cmd
+        ->add_option("--triangles", building->triangles,
+                     "Approximate triangle count, furniture included, K/M/G suffixes: 2M")
+        ->capture_default_str();
+    building_cmd->add_option("--seed", building->seed, "Seed (same options, same model)")
+        ->capture_default_str();
+    building_cmd->add_option("--out", building->out, "Output directory")->required();
+    building_cmd->add_flag("--quiet", building->quiet, "No progress on standard error");
+    building_cmd->callback([building, &exit_code] { exit_code = run_building(*building); });
+}
+
+}  // namespace proxima::cli
