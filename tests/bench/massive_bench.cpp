@@ -42,6 +42,7 @@ struct Args {
     double tolerance = 0.0;
     int poses = 2000;
     double avatar_mb = 160;
+    double nearest_max = INFINITY;  // avatar: nearest object within this distance
     bool quick = false;
     // Internal: run one measurement and print one line.
     std::string child;
@@ -198,13 +199,20 @@ int child_avatar(const Args& a) {
     std::uint64_t within = 0;
     const Vec3 e = box.extent();
     const double z = box.lo.z + 0.35 * e.z;
+    const auto start = std::chrono::steady_clock::now();
     for (int k = 0; k < a.poses; ++k) {
         const double x = box.lo.x + 0.05 * e.x + 0.05 * k;
         const double y = box.lo.y + 0.5 * e.y + 0.15 * e.y * std::sin(0.01 * k);
         Affine pose;
         pose.m = {1, 0, 0, x, 0, 1, 0, y, 0, 0, 1, z};
+        // Poses at 60 Hz (a user walking at 3 m/s): the prefetch thread works between poses, as
+        // it would in a review session; latency is measured per pose.
+        std::this_thread::sleep_until(start + std::chrono::microseconds(16667) * k);
         const auto t0 = std::chrono::steady_clock::now();
-        auto r = (*tracker)->query(pose, {a.tolerance > 0 ? a.tolerance : 0.05, true, 8.0});
+        AvatarQueryOptions q;
+        q.tolerance = a.tolerance > 0 ? a.tolerance : 0.05;
+        q.nearest_max_distance = a.nearest_max;
+        auto r = (*tracker)->query(pose, q);
         ms.push_back(
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                 .count());
@@ -214,6 +222,17 @@ int child_avatar(const Args& a) {
         }
         collisions += r->collisions.size();
         within += r->within.size();
+        if (std::getenv("PROXIMA_BENCH_TRACE") != nullptr && ms.back() > 2.0) {
+            const auto cs = cache->stats();
+            std::fprintf(stderr,
+                         "pose %d: %.2f ms, %llu candidates, %llu pieces tested, %llu exact "
+                         "tests, nearest %.3f, cache waits+misses %llu\n",
+                         k, ms.back(), static_cast<unsigned long long>(r->candidate_pieces),
+                         static_cast<unsigned long long>(r->pieces_tested),
+                         static_cast<unsigned long long>(r->exact_tests),
+                         r->nearest ? r->nearest->distance : -1.0,
+                         static_cast<unsigned long long>(cs.waits + cs.misses));
+        }
     }
     std::vector<double> sorted = ms;
     std::sort(sorted.begin(), sorted.end());
@@ -234,10 +253,14 @@ int child_avatar(const Args& a) {
     return 0;
 }
 
-std::string run_child(const std::string& self, const Args& a, const std::string& what, double mb) {
+std::string run_child(const std::string& self, const Args& a, const std::string& what, double mb,
+                      double nearest_max = INFINITY) {
     std::ostringstream cmd;
     cmd << '"' << self << "\" --child " << what << " --child-mb " << mb << " --store \"" << a.store
         << "\" --tolerance " << a.tolerance << " --poses " << a.poses;
+    if (std::isfinite(nearest_max)) {
+        cmd << " --nearest-max " << nearest_max;
+    }
     FILE* p = popen(cmd.str().c_str(), "r");
     std::string out;
     char buf[4096];
@@ -285,6 +308,8 @@ int main(int argc, char** argv) {
             a.tolerance = std::stod(next());
         } else if (k == "--poses") {
             a.poses = std::stoi(next());
+        } else if (k == "--nearest-max") {
+            a.nearest_max = std::stod(next());
         } else if (k == "--avatar-mb") {
             a.avatar_mb = std::stod(next());
         } else if (k == "--quick") {
@@ -352,10 +377,15 @@ int main(int argc, char** argv) {
                     field(line, "rss_peak_mb") - mb);
         std::fflush(stdout);
     }
-    std::printf("\n## avatar (4,140 triangles) along a %d-pose path, M = %.0f MB, cold cache\n",
-                a.poses, a.avatar_mb);
-    const std::string line = run_child(self, a, "avatar", a.avatar_mb);
-    std::printf("%s", line.c_str());
+    std::printf(
+        "\n## avatar (4,140 triangles) along a %d-pose path, M = %.0f MB, cold cache; "
+        "per pose: collisions, objects within 5 cm, nearest object\n",
+        a.poses, a.avatar_mb);
+    for (double nearest_max : {double(INFINITY), 1.0}) {
+        std::printf("nearest within %s: %s", std::isfinite(nearest_max) ? "1 m" : "any distance",
+                    run_child(self, a, "avatar", a.avatar_mb, nearest_max).c_str());
+        std::fflush(stdout);
+    }
     if (temporary) {
         fs::remove_all(a.store);
     }

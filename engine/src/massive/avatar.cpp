@@ -235,6 +235,9 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
     if (!std::isfinite(options.tolerance) || options.tolerance < 0.0) {
         return invalid_argument("tolerance must be a finite distance >= 0");
     }
+    if (std::isnan(options.nearest_max_distance) || options.nearest_max_distance < 0.0) {
+        return invalid_argument("nearest_max_distance must be >= 0 (or infinite)");
+    }
     const auto t0 = std::chrono::steady_clock::now();
     AvatarResult result;
     m_posed.resize(m_mesh.vertices.size());
@@ -329,7 +332,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
     // 2. The nearest object: candidates in growing radii around the avatar's box, starting from
     // the previous pose's distance plus how far the box moved (temporal coherence).
     if (options.nearest && (!pieces.empty() || !snap->overlay.empty())) {
-        double radius = options.tolerance;
+        double radius = std::min(options.tolerance, options.nearest_max_distance);
         if (m_has_previous) {
             const Vec3 dlo = box.lo - m_previous_box.lo;
             const Vec3 dhi = box.hi - m_previous_box.hi;
@@ -339,7 +342,8 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         for (const auto& h : result.within) {
             radius = std::max(radius, h.distance);
         }
-        radius = std::max(radius, 1e-3 * norm(box.extent()));
+        radius =
+            std::min(std::max(radius, 1e-3 * norm(box.extent())), options.nearest_max_distance);
         bool have = false;
         double best_sq = std::numeric_limits<double>::infinity();
         AvatarHit nearest;
@@ -370,12 +374,15 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
                 const auto& t = m_mesh.triangles[m_seed.avatar];
                 const Triangle y{m_posed[t[0]], m_posed[t[1]], m_posed[t[2]]};
                 seed_sq = triangle_triangle(p->bvh.corners(m_seed.local), y).squared_distance;
-                radius = std::max(radius, std::sqrt(seed_sq));
+                radius =
+                    std::min(std::max(radius, std::sqrt(seed_sq)), options.nearest_max_distance);
             }
         }
+        const double max_d = options.nearest_max_distance;
+        const double max_sq = max_d * max_d;
         auto bound_now = [&] {
             const double b = have ? best_sq : seed_sq;
-            return std::isfinite(b) ? std::nextafter(b, INFINITY) : b;
+            return std::min(std::isfinite(b) ? std::nextafter(b, INFINITY) : b, max_sq);
         };
         std::uint32_t current_piece = 0;
         auto consider = [&](std::uint32_t object, const PairHit& h) {
@@ -430,10 +437,12 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             }
             // Done when the best lies within the searched radius (every piece outside it is
             // farther), or when every piece has been searched.
-            if ((have && best_sq <= radius * radius) || tested.size() >= pieces.size()) {
+            if ((have && best_sq <= radius * radius) || tested.size() >= pieces.size() ||
+                radius >= max_d) {
                 break;
             }
-            radius = std::max(radius * 4.0, 1e-9 + (have ? std::sqrt(best_sq) : 0.0));
+            radius =
+                std::min(max_d, std::max(radius * 4.0, 1e-9 + (have ? std::sqrt(best_sq) : 0.0)));
         }
         if (have) {
             nearest.distance = std::sqrt(best_sq);
@@ -451,8 +460,10 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
                           box.hi + velocity * options.prefetch_poses});
         std::vector<std::uint32_t> near;
         // Grown by the nearest distance too: the next poses' nearest search reads that far.
+        // And by half the avatar's size, so a turn or a speed-up does not outrun it.
         const double reach =
-            std::max(options.tolerance, result.nearest ? result.nearest->distance : 0.0);
+            std::max({options.tolerance, result.nearest ? result.nearest->distance : 0.0,
+                      0.5 * norm(box.extent())});
         m_view->index().within(ahead, reach, slack, near);
         std::vector<std::uint32_t> hints;
         for (auto p : near) {

@@ -32,6 +32,20 @@ LazyBvh::LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices
     }
 }
 
+void LazyBvh::expand_above(std::uint32_t count) {
+    std::vector<const Node*> stack{&root()};
+    while (!stack.empty()) {
+        const Node* n = stack.back();
+        stack.pop_back();
+        if (n->leaf() || n->count <= count) {
+            continue;
+        }
+        auto [l, r] = children(*n);
+        stack.push_back(l);
+        stack.push_back(r);
+    }
+}
+
 std::uint64_t LazyBvh::memory_bytes() const {
     std::uint64_t blocks = 0;
     for (const auto& b : m_blocks) {
@@ -179,9 +193,18 @@ struct PairSearch {
                 // The triangles' boxes first (a lower bound up to rounding, which the widened
                 // threshold covers): a pair beyond it can be neither closer nor tied.
                 const double t = threshold();
-                if (std::isfinite(t) && box_squared_distance(triangle_box(x[0], x[1], x[2]),
-                                                             triangle_box(y[0], y[1], y[2])) > t) {
-                    continue;
+                if (std::isfinite(t)) {
+                    if (box_squared_distance(triangle_box(x[0], x[1], x[2]),
+                                             triangle_box(y[0], y[1], y[2])) > t) {
+                        continue;
+                    }
+                    // Then the separating-plane and centroid-axis bounds (each accounts for its
+                    // own rounding): tight where boxes are loose, small triangles facing each
+                    // other from afar.
+                    const double lb = triangle_lower_bound(x, y, slack);
+                    if (lb * lb > t) {
+                        continue;
+                    }
                 }
                 ++hit.exact_tests;
                 const auto cp = triangle_triangle(x, y);
@@ -348,6 +371,14 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
         return get(store, piece);
     }
     auto geometry = store->read_piece(piece);
+    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;
+    PieceHandle resident;
+    const auto& info = store->pieces()[piece];
+    if (geometry.ok()) {
+        tree_bytes = std::make_shared<std::atomic<std::int64_t>>(0);
+        resident = std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry),
+                                                   tree_bytes.get());
+    }
     std::unique_lock lock(m_mutex);
     entry->loading = false;
     if (!geometry.ok()) {
@@ -357,10 +388,8 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
         m_loaded.notify_all();
         return geometry.status();
     }
-    const auto& info = store->pieces()[piece];
-    entry->tree_bytes = std::make_shared<std::atomic<std::int64_t>>(0);
-    entry->piece = std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry),
-                                                   entry->tree_bytes.get());
+    entry->tree_bytes = std::move(tree_bytes);
+    entry->piece = std::move(resident);
     entry->charged = static_cast<std::int64_t>(entry->piece->geometry_bytes());
     ++m_stats.loads;
     if (by_prefetch) {
@@ -370,7 +399,15 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     m_stats.bytes_loaded += info.bytes;
     evict_locked();
     m_loaded.notify_all();
-    return entry->piece;
+    PieceHandle handle = entry->piece;
+    lock.unlock();
+    if (by_prefetch) {
+        // §4.3: the prefetch phase also builds hierarchies ahead of the queries (the upper
+        // levels; the last ones stay lazy), after publishing the piece: a query that needs it
+        // meanwhile uses it at once (the tree is safe to expand from several threads).
+        handle->bvh.expand_above(PREFETCH_EXPAND_ABOVE);
+    }
+    return handle;
 }
 
 void GeometryCache::evict_locked() {

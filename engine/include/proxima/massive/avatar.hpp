@@ -87,7 +87,11 @@ class ModelView {
 
 struct AvatarQueryOptions {
     double tolerance = 0.0;  // report objects within this distance (>= 0)
-    bool nearest = true;     // the closest object, whatever its distance
+    bool nearest = true;     // the closest object
+    // ... among objects at most this far (the search stops there; no nearest when none is):
+    // design review rarely cares about the closest object five metres away, and the exact
+    // search's cost grows with the distance (more near-tied triangle pairs).
+    double nearest_max_distance = std::numeric_limits<double>::infinity();
     // Prefetch along the velocity: the box swept over this many future poses.
     double prefetch_poses = 4.0;
 };

@@ -53,6 +53,8 @@ class LazyBvh {
         const auto& tri = m_triangles[t];
         return {m_vertices[tri[0]], m_vertices[tri[1]], m_vertices[tri[2]]};
     }
+    // Builds every node holding more than `count` triangles (the prefetch thread's head start).
+    void expand_above(std::uint32_t count);
     std::uint32_t nodes_built() const { return m_count.load(std::memory_order_relaxed); }
     std::uint64_t memory_bytes() const;
 
@@ -103,6 +105,8 @@ struct CacheStats {
 // until handles are released (peak_bytes shows by how much).
 class GeometryCache {
   public:
+    // Prefetched pieces get their hierarchy built down to nodes of this many triangles.
+    static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = 32;
     explicit GeometryCache(std::uint64_t budget_bytes);
     ~GeometryCache();
     GeometryCache(const GeometryCache&) = delete;
