@@ -160,9 +160,10 @@ int child_verify(const Args& a) {
         return 1;
     }
     std::printf(
-        "loaded_per_triangle=%.4f pairs=%llu edges=%llu subgraphs=%llu seconds=%.3f "
+        "reload=%.4f loaded_per_triangle=%.4f pairs=%llu edges=%llu subgraphs=%llu seconds=%.3f "
         "plan_seconds=%.3f peak_cache_mb=%.1f rss_peak_mb=%.1f waits=%llu "
         "blocked_seconds=%.3f exact_tests=%llu\n",
+        double(stats->cache.triangles_loaded) / double(stats->edge_triangles),
         double(stats->cache.triangles_loaded) / double(stats->model_triangles),
         static_cast<unsigned long long>(stats->pairs_found),
         static_cast<unsigned long long>(stats->edges),
@@ -365,13 +366,14 @@ int main(int argc, char** argv) {
         static_cast<unsigned long long>(sum.pieces), static_cast<unsigned long long>(sum.triangles),
         sum.bytes / 1e6, model_bytes / 1048576.0, a.tolerance);
     std::printf("\n## static verification per cache budget M (fresh process each)\n");
-    std::printf("%8s %10s %8s %9s %9s %10s %12s %10s %10s %9s\n", "M_MB", "loads/tri", "pairs",
-                "edges", "seconds", "plan_s", "Mtri/s", "cache_pk", "rss_pk_MB", "rss-M");
+    std::printf("%8s %10s %8s %8s %9s %9s %10s %12s %10s %10s %9s\n", "M_MB", "loads/tri",
+                "reload", "pairs", "edges", "seconds", "plan_s", "Mtri/s", "cache_pk", "rss_pk_MB", "rss-M");
     for (double mb : a.cache_mb) {
         const std::string line = run_child(self, a, "verify", mb);
         const double secs = field(line, "seconds");
-        std::printf("%8.0f %10.3f %8.0f %9.0f %9.2f %10.2f %12.2f %10.1f %10.1f %9.1f\n", mb,
-                    field(line, "loaded_per_triangle"), field(line, "pairs"), field(line, "edges"),
+        std::printf("%8.0f %10.3f %8.3f %8.0f %9.0f %9.2f %10.2f %12.2f %10.1f %10.1f %9.1f\n",
+                    mb, field(line, "loaded_per_triangle"), field(line, "reload"),
+                    field(line, "pairs"), field(line, "edges"),
                     secs, field(line, "plan_seconds"), sum.triangles / 1e6 / secs,
                     field(line, "peak_cache_mb"), field(line, "rss_peak_mb"),
                     field(line, "rss_peak_mb") - mb);

@@ -120,6 +120,15 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
         edges.insert(edges.end(), sg.edges.begin(), sg.edges.end());
     }
     stats.edges = edges.size();
+    {
+        std::vector<std::uint8_t> used(pieces.size(), 0);
+        for (const auto& [a, b] : edges) {
+            used[a] = used[b] = 1;
+        }
+        for (std::size_t p = 0; p < pieces.size(); ++p) {
+            stats.edge_triangles += used[p] != 0 ? pieces[p].triangle_count : 0;
+        }
+    }
     struct Aggregate {
         std::uint32_t remaining = 0;
         bool found = false;

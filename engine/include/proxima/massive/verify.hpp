@@ -33,6 +33,9 @@ struct VerifyStats {
     std::uint64_t objects = 0;
     std::uint64_t pieces = 0;
     std::uint64_t model_triangles = 0;
+    // Triangles of the pieces some edge needs: each must be loaded at least once, the rest never
+    // (cache.triangles_loaded / edge_triangles is the re-load factor of the schedule).
+    std::uint64_t edge_triangles = 0;
     std::uint64_t subgraphs = 0;
     std::uint64_t edges = 0;         // piece pairs tested
     std::uint64_t object_pairs = 0;  // object pairs with at least one edge
