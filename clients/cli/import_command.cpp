@@ -1,0 +1,274 @@
+// proxima import: mesh files, directories of them, scene files or a generated plant into an
+// on-disk model store (engine/include/proxima/massive/store.hpp), with progress on standard
+// error and a JSON summary on standard output. proxima store-info: what a store holds, and with
+// --verify whether every chunk still matches its checksum.
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.hpp"
+#include "common/progress.hpp"
+#include "proxima/massive/generator.hpp"
+#include "proxima/massive/store.hpp"
+
+namespace proxima::cli {
+
+namespace {
+
+int fail(const Status& status) {
+    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
+    return 1;
+}
+
+// "16M" -> 16 * 1024^2 (bytes) or 16 * 1000^2 (counts); "1.5G", "4096", "64KiB" too.
+StatusOr<std::uint64_t> parse_size(const std::string& option, const std::string& text,
+                                   std::uint64_t base) {
+    auto bad = [&] {
+        return invalid_argument(option + " '" + text +
+                                "': expected a positive number with an optional K, M, G or T "
+                                "suffix");
+    };
+    std::size_t used = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        return bad();
+    }
+    std::string suffix = text.substr(used);
+    for (auto& c : suffix) {
+        c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    }
+    if (suffix.size() > 1 && (suffix.back() == 'B')) {
+        suffix.pop_back();  // "MB", "MiB"
+        if (!suffix.empty() && suffix.back() == 'I') {
+            suffix.pop_back();
+        }
+    } else if (suffix == "B") {
+        suffix.clear();
+    }
+    double scale = 1;
+    if (suffix == "K") {
+        scale = static_cast<double>(base);
+    } else if (suffix == "M") {
+        scale = std::pow(static_cast<double>(base), 2);
+    } else if (suffix == "G") {
+        scale = std::pow(static_cast<double>(base), 3);
+    } else if (suffix == "T") {
+        scale = std::pow(static_cast<double>(base), 4);
+    } else if (!suffix.empty()) {
+        return bad();
+    }
+    const double result = std::round(value * scale);
+    if (!std::isfinite(result) || result < 1 || result > 1.8e19) {
+        return bad();
+    }
+    return static_cast<std::uint64_t>(result);
+}
+
+nlohmann::json summary_json(const massive::StoreSummary& s) {
+    return {{"store", s.path},
+            {"generation", s.generation},
+            {"objects", s.objects},
+            {"pieces", s.pieces},
+            {"split_objects", s.split_objects},
+            {"triangles", s.triangles},
+            {"vertices", s.vertices},
+            {"chunks", s.chunks},
+            {"bytes", s.bytes}};
+}
+
+struct ImportArgs {
+    std::string store;
+    std::string max_piece_bytes;
+    std::string cache_bytes;
+    std::string chunk_bytes;
+    std::string plant;
+    std::uint64_t seed = 1;
+    bool quiet = false;
+    std::vector<std::string> inputs;
+};
+
+StatusOr<massive::StoreSummary> import_plant(const ImportArgs& args,
+                                             const massive::StoreOptions& options,
+                                             client::ProgressPrinter& printer) {
+    auto triangles = parse_size("--plant", args.plant, 1000);
+    if (!triangles.ok()) {
+        return triangles.status();
+    }
+    massive::PlantOptions plant;
+    plant.triangles = triangles.value();
+    plant.seed = args.seed;
+    auto writer = massive::StoreWriter::create(args.store, options);
+    if (!writer.ok()) {
+        return writer.status();
+    }
+    // Objects go straight from the generator into the writer: the model is never held whole.
+    auto generated = massive::generate_plant(
+        plant,
+        [&](massive::ModelObject&& object) { return writer.value()->add(std::move(object)); },
+        printer.callback());
+    if (!generated.ok()) {
+        return generated.status();
+    }
+    return writer.value()->commit(printer.callback());
+}
+
+int run_import(const ImportArgs& args) {
+    massive::StoreOptions options;
+    if (!args.max_piece_bytes.empty()) {
+        auto v = parse_size("--max-piece-bytes", args.max_piece_bytes, 1024);
+        if (!v.ok()) {
+            return fail(v.status());
+        }
+        options.max_piece_bytes = v.value();
+    } else if (!args.cache_bytes.empty()) {
+        auto v = parse_size("--cache-bytes", args.cache_bytes, 1024);
+        if (!v.ok()) {
+            return fail(v.status());
+        }
+        options.max_piece_bytes = v.value() / massive::SPLIT_FRACTION;
+    }
+    if (!args.chunk_bytes.empty()) {
+        auto v = parse_size("--chunk-bytes", args.chunk_bytes, 1024);
+        if (!v.ok()) {
+            return fail(v.status());
+        }
+        options.chunk_bytes = v.value();
+    }
+    if (args.plant.empty() == args.inputs.empty()) {
+        return fail(invalid_argument(args.plant.empty()
+                                         ? "nothing to import: give input files or --plant"
+                                         : "--plant generates the model: give no input files"));
+    }
+    if (args.plant.empty()) {
+        options.source = "import of";
+        for (const auto& input : args.inputs) {
+            options.source += ' ';
+            options.source += input;
+        }
+    } else {
+        auto triangles = parse_size("--plant", args.plant, 1000);
+        if (!triangles.ok()) {
+            return fail(triangles.status());
+        }
+        options.source = "plant " + std::to_string(triangles.value()) + " triangles seed " +
+                         std::to_string(args.seed);
+    }
+    const auto start = std::chrono::steady_clock::now();
+    client::ProgressPrinter printer(args.quiet);
+    auto summary = args.plant.empty()
+                       ? massive::import_files(args.inputs, args.store, options, printer.callback())
+                       : import_plant(args, options, printer);
+    printer.finish();
+    if (!summary.ok()) {
+        return fail(summary.status());
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    auto doc = summary_json(summary.value());
+    doc["max_piece_bytes"] = options.max_piece_bytes;
+    doc["chunk_bytes"] = options.chunk_bytes;
+    doc["source"] = options.source;
+    doc["seconds"] = seconds;
+    doc["triangles_per_second"] =
+        seconds > 0 ? static_cast<double>(summary->triangles) / seconds : 0.0;
+    doc["bytes_per_second"] = seconds > 0 ? static_cast<double>(summary->bytes) / seconds : 0.0;
+    std::cout << doc.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
+    return 0;
+}
+
+struct InfoArgs {
+    std::string store;
+    bool verify = false;
+    bool objects = false;
+    bool quiet = false;
+};
+
+nlohmann::json box_json(const Aabb& b) {
+    return {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
+}
+
+int run_store_info(const InfoArgs& args) {
+    auto opened = massive::Store::open(args.store);
+    if (!opened.ok()) {
+        return fail(opened.status());
+    }
+    const auto& store = *opened.value();
+    auto doc = summary_json(store.summary());
+    std::uint64_t largest = 0;
+    for (const auto& p : store.pieces()) {
+        largest = std::max(largest, p.weight());
+    }
+    doc["largest_piece_weight"] = largest;
+    if (args.objects) {
+        auto objects = nlohmann::json::array();
+        for (const auto& o : store.objects()) {
+            objects.push_back({{"name", o.name},
+                               {"box", box_json(o.box)},
+                               {"vertices", o.vertex_count},
+                               {"triangles", o.triangle_count},
+                               {"first_piece", o.first_piece},
+                               {"pieces", o.piece_count}});
+        }
+        doc["object_list"] = std::move(objects);
+    }
+    if (args.verify) {
+        const auto start = std::chrono::steady_clock::now();
+        client::ProgressPrinter printer(args.quiet);
+        const Status verified = store.verify(printer.callback());
+        printer.finish();
+        if (!verified.ok()) {
+            return fail(verified);
+        }
+        doc["verified"] = true;
+        doc["verify_seconds"] =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+    std::cout << doc.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
+    return 0;
+}
+
+}  // namespace
+
+void add_import_command(CLI::App& app, int& exit_code) {
+    auto args = std::make_shared<ImportArgs>();
+    auto* cmd = app.add_subcommand(
+        "import",
+        "Import mesh files, directories, scene files (*.json, proxima-scene/1) or a generated "
+        "plant into a model store");
+    cmd->add_option("--store", args->store, "The store directory (created if absent)")->required();
+    auto* max_piece = cmd->add_option(
+        "--max-piece-bytes", args->max_piece_bytes,
+        "Split objects into pieces of at most this cache weight (K/M/G: powers of 1024; "
+        "default 16M)");
+    cmd->add_option("--cache-bytes", args->cache_bytes,
+                    "The runtime cache size M: pieces are at most M/10")
+        ->excludes(max_piece);
+    cmd->add_option("--chunk-bytes", args->chunk_bytes, "Checksummed chunk size (default 1M)");
+    auto* plant = cmd->add_option("--plant", args->plant,
+                                  "Generate a plant of about this many triangles (K/M/G: powers "
+                                  "of 1000) instead of reading files");
+    cmd->add_option("--seed", args->seed, "Seed of the generated plant")->needs(plant);
+    cmd->add_flag("--quiet", args->quiet, "No progress on standard error");
+    cmd->add_option("inputs", args->inputs, "Mesh files, directories or scene files");
+    cmd->callback([args, &exit_code] { exit_code = run_import(*args); });
+
+    auto info_args = std::make_shared<InfoArgs>();
+    auto* info = app.add_subcommand("store-info", "Summarise a model store (JSON)");
+    info->add_option("--store", info_args->store, "The store directory")->required();
+    info->add_flag("--verify", info_args->verify,
+                   "Read every chunk and check its checksum (exit 1 if one is corrupt)");
+    info->add_flag("--objects", info_args->objects, "List the objects");
+    info->add_flag("--quiet", info_args->quiet, "No progress on standard error");
+    info->callback([info_args, &exit_code] { exit_code = run_store_info(*info_args); });
+}
+
+}  // namespace proxima::cli
