@@ -440,7 +440,9 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
                   at.z};
         for (double tolerance : {0.0, 0.25}) {
             const auto t0 = std::chrono::steady_clock::now();
-            auto r = (*tracker)->query(pose, {tolerance, true, 4.0});
+            AvatarQueryOptions options;
+            options.tolerance = tolerance;
+            auto r = (*tracker)->query(pose, options);
             avatar_seconds +=
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             ASSERT_TRUE(r.ok()) << r.status().to_string();
@@ -450,6 +452,19 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
             check_against_engine(
                 *view, objects, posed, *r, tolerance,
                 "pose " + std::to_string(k) + " tolerance " + std::to_string(tolerance));
+            // The nearest object within a radius: the same one when it is that close, none
+            // otherwise.
+            AvatarQueryOptions bounded = options;
+            bounded.nearest_max_distance = 0.75;
+            auto b = (*tracker)->query(pose, bounded);
+            ASSERT_TRUE(b.ok());
+            if (r->nearest && r->nearest->distance <= 0.75) {
+                ASSERT_TRUE(b->nearest.has_value());
+                EXPECT_EQ(b->nearest->distance, r->nearest->distance);
+                EXPECT_EQ(b->nearest->object, r->nearest->object);
+            } else {
+                EXPECT_FALSE(b->nearest.has_value());
+            }
         }
     }
     EXPECT_GT(collisions, 0u) << "the path should hit something";

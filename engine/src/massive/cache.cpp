@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <tuple>
 
 #include "proxima/distance/bounds.hpp"
 
@@ -12,8 +13,12 @@ namespace proxima::massive {
 // LazyBvh
 
 LazyBvh::LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices> triangles,
-                 std::atomic<std::int64_t>* bytes)
-    : m_vertices(vertices), m_triangles(triangles), m_order(triangles.size()), m_bytes(bytes) {
+                 std::atomic<std::int64_t>* bytes, std::span<const std::uint32_t> source)
+    : m_vertices(vertices),
+      m_triangles(triangles),
+      m_source(source),
+      m_order(triangles.size()),
+      m_bytes(bytes) {
     for (std::uint32_t t = 0; t < m_order.size(); ++t) {
         m_order[t] = t;
     }
@@ -73,13 +78,17 @@ std::uint32_t LazyBvh::allocate_two() {
 
 void LazyBvh::set_box(Node& n) {
     Aabb box;
+    std::uint32_t min_source = UINT32_MAX;
     for (std::uint32_t s = n.first; s < n.first + n.count; ++s) {
-        const auto& tri = m_triangles[m_order[s]];
+        const std::uint32_t t = m_order[s];
+        min_source = std::min(min_source, m_source.empty() ? t : m_source[t]);
+        const auto& tri = m_triangles[t];
         box.extend(m_vertices[tri[0]]);
         box.extend(m_vertices[tri[1]]);
         box.extend(m_vertices[tri[2]]);
     }
     n.box = box;
+    n.min_source = min_source;
 }
 
 std::pair<const LazyBvh::Node*, const LazyBvh::Node*> LazyBvh::children(const Node& n) {
@@ -128,7 +137,7 @@ ResidentPiece::ResidentPiece(std::uint32_t piece_index, std::uint32_t object_ind
     : piece(piece_index),
       object(object_index),
       geometry(std::move(g)),
-      bvh(geometry.vertices, geometry.triangles, bytes) {}
+      bvh(geometry.vertices, geometry.triangles, bytes, geometry.source_triangles) {}
 
 std::uint64_t ResidentPiece::geometry_bytes() const {
     return geometry.vertices.size() * sizeof(Vec3) +
@@ -232,8 +241,20 @@ struct PairSearch {
             }
         }
     }
+    // With a best distance of 0 nothing is strictly closer: only a tied pair of smaller indices
+    // (in the tie order) could still win, and a subtree pair whose smallest indices are not
+    // smaller cannot hold one.
+    bool cannot_beat_tie(const LazyBvh::Node& na, const LazyBvh::Node& nb) const {
+        if (!hit.found || hit.squared_distance != 0.0) {
+            return false;
+        }
+        const auto [first, second, best_first, best_second] =
+            ties_b_first ? std::tuple{nb.min_source, na.min_source, hit.triangle_b, hit.triangle_a}
+                         : std::tuple{na.min_source, nb.min_source, hit.triangle_a, hit.triangle_b};
+        return first > best_first || (first == best_first && second >= best_second);
+    }
     void visit(const LazyBvh::Node& na, const Aabb& ba, const LazyBvh::Node& nb, const Aabb& bb) {
-        if (box_squared_distance(ba, bb) > threshold()) {
+        if (box_squared_distance(ba, bb) > threshold() || cannot_beat_tie(na, nb)) {
             return;
         }
         const bool la = na.leaf();

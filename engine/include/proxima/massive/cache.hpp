@@ -33,13 +33,17 @@ class LazyBvh {
         Aabb box;
         std::uint32_t first = 0;  // range of order()
         std::uint32_t count = 0;
+        // Smallest reported (source) triangle index below: lets a search whose best distance is
+        // 0 skip subtrees that cannot hold a smaller tied pair.
+        std::uint32_t min_source = 0;
         std::atomic<std::uint32_t> left{NONE};  // right child is left + 1
         bool leaf() const { return count <= LEAF_SIZE; }
     };
 
-    // `bytes` (optional) is credited with the memory of every node built.
+    // `bytes` (optional) is credited with the memory of every node built; `source` (optional)
+    // maps triangles to the indices results report (identity when empty).
     LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices> triangles,
-            std::atomic<std::int64_t>* bytes = nullptr);
+            std::atomic<std::int64_t>* bytes = nullptr, std::span<const std::uint32_t> source = {});
     LazyBvh(const LazyBvh&) = delete;
     LazyBvh& operator=(const LazyBvh&) = delete;
 
@@ -66,6 +70,7 @@ class LazyBvh {
 
     std::span<const Vec3> m_vertices;
     std::span<const TriangleIndices> m_triangles;
+    std::span<const std::uint32_t> m_source;
     std::vector<std::uint32_t> m_order;
     std::vector<std::unique_ptr<Node[]>> m_blocks;  // sized for the worst case up front
     std::atomic<std::uint32_t> m_count{0};
@@ -105,8 +110,9 @@ struct CacheStats {
 // until handles are released (peak_bytes shows by how much).
 class GeometryCache {
   public:
-    // Prefetched pieces get their hierarchy built down to nodes of this many triangles.
-    static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = 32;
+    // Prefetched pieces get their whole hierarchy built by the prefetch thread (a query then
+    // never pays for a first visit); pieces a query loads itself stay lazy.
+    static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = LazyBvh::LEAF_SIZE;
     explicit GeometryCache(std::uint64_t budget_bytes);
     ~GeometryCache();
     GeometryCache(const GeometryCache&) = delete;
