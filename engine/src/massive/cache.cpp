@@ -353,7 +353,12 @@ StatusOr<PieceHandle> GeometryCache::get(const std::shared_ptr<const Store>& sto
             } else {
                 ++m_stats.hits;
             }
-            m_lru.splice(m_lru.begin(), m_lru, entry->lru);
+            // The entry may have been evicted (or failed) while this call waited: touch the LRU
+            // only if it is still the cached one.
+            auto again = m_entries.find(key);
+            if (again != m_entries.end() && again->second == entry) {
+                m_lru.splice(m_lru.begin(), m_lru, entry->lru);
+            }
             return entry->piece;
         }
         ++m_stats.misses;
@@ -418,9 +423,10 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     }
     m_stats.triangles_loaded += info.triangle_count;
     m_stats.bytes_loaded += info.bytes;
+    // Pinned before evicting, so the piece just read is not the one thrown out.
+    PieceHandle handle = entry->piece;
     evict_locked();
     m_loaded.notify_all();
-    PieceHandle handle = entry->piece;
     lock.unlock();
     if (by_prefetch) {
         // §4.3: the prefetch phase also builds hierarchies ahead of the queries (the upper
@@ -504,6 +510,20 @@ CacheStats GeometryCache::stats() const {
     s.resident_bytes = total;
     s.peak_bytes = std::max(s.peak_bytes, total);
     return s;
+}
+
+CacheStats counters_since(const CacheStats& before, const CacheStats& after) {
+    CacheStats d = after;
+    d.hits -= before.hits;
+    d.misses -= before.misses;
+    d.waits -= before.waits;
+    d.loads -= before.loads;
+    d.prefetch_loads -= before.prefetch_loads;
+    d.triangles_loaded -= before.triangles_loaded;
+    d.bytes_loaded -= before.bytes_loaded;
+    d.evictions -= before.evictions;
+    d.blocked_seconds -= before.blocked_seconds;
+    return d;
 }
 
 void GeometryCache::reset_counters() {

@@ -155,7 +155,8 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
         static_cast<std::uint64_t>(options.prefetch_share * static_cast<double>(cache.budget()));
     const std::uint64_t stream = reinterpret_cast<std::uintptr_t>(&stats);
 
-    cache.reset_counters();
+    // The cache may be shared (the daemon's): this run's counters are the difference.
+    const CacheStats before = cache.stats();
     const auto t0 = std::chrono::steady_clock::now();
     std::atomic<std::size_t> next{0};
     std::atomic<std::size_t> done{0};
@@ -270,7 +271,7 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
     stats.seconds = seconds_since(t0);
     stats.exact_tests = exact_tests.load();
     stats.pairs_found = found.size();
-    stats.cache = cache.stats();
+    stats.cache = counters_since(before, cache.stats());
     if (all != nullptr) {
         std::sort(found.begin(), found.end(), [](const auto& x, const auto& y) {
             return std::tie(x.object_a, x.object_b) < std::tie(y.object_a, y.object_b);

@@ -104,6 +104,9 @@ struct CacheStats {
     std::uint64_t evictions = 0;
     double blocked_seconds = 0;  // time get() spent waiting for disk
 };
+// Counters accumulated between two snapshots of a shared cache (budget, resident and peak are
+// taken from `after`).
+CacheStats counters_since(const CacheStats& before, const CacheStats& after);
 
 // LRU cache of pieces of any number of stores under one byte budget. Pinned pieces (a handle is
 // held) are never evicted; when everything resident is pinned the cache may exceed the budget
