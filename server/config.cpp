@@ -79,6 +79,10 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
             s = read_unsigned(value, key, base.worker_threads);
         } else if (key == "gpu") {
             s = read_string(value, key, base.gpu);
+        } else if (key == "models") {
+            s = read_string(value, key, base.models_dir);
+        } else if (key == "cache-bytes") {
+            s = read_unsigned(value, key, base.cache_bytes);
         } else {
             // A misspelt key silently falling back to a default is how limits get lost.
             s = invalid_argument("unknown config key '" + key +
@@ -129,6 +133,11 @@ Status validate_config(const ServerConfig& config) {
     if (config.gpu != "auto" && config.gpu != "off") {
         return invalid_argument("gpu '" + config.gpu + "' is not one of auto, off");
     }
+    // The cache must hold at least the two pieces of one test; the store's split size decides
+    // whether that holds, and verification says so (FAILED_PRECONDITION) when it does not.
+    if (config.cache_bytes == 0) {
+        return invalid_argument("cache-bytes must be at least 1");
+    }
     return {};
 }
 
@@ -142,7 +151,9 @@ nlohmann::json config_json(const ServerConfig& c) {
             {"drain-seconds", c.drain_seconds},
             {"log-level", c.log_level},
             {"worker-threads", c.worker_threads},
-            {"gpu", c.gpu}};
+            {"gpu", c.gpu},
+            {"models", c.models_dir},
+            {"cache-bytes", c.cache_bytes}};
 }
 
 ConfigOutcome load_config(int argc, char** argv) {
@@ -213,6 +224,17 @@ ConfigOutcome load_config(int argc, char** argv) {
                        "else the CPU backend; off: CPU backend only")
             ->default_str(defaults.gpu),
         [&](ServerConfig& c) { c.gpu = flags.gpu; });
+
+    add(app.add_option("--models", flags.models_dir,
+                       "serve every model store found in a subdirectory of DIR (named by the "
+                       "subdirectory); rescanned when models are listed or an unknown one is named")
+            ->type_name("DIR"),
+        [&](ServerConfig& c) { c.models_dir = flags.models_dir; });
+    add(app.add_option("--cache-bytes", flags.cache_bytes,
+                       "budget in bytes of the geometry cache shared by every model, "
+                       "verification and review room")
+            ->default_str(std::to_string(defaults.cache_bytes)),
+        [&](ServerConfig& c) { c.cache_bytes = flags.cache_bytes; });
 
     try {
         app.parse(argc, argv);

@@ -9,6 +9,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "proxima/massive/model.hpp"
 #include "proxima/status.hpp"
 
 namespace proxima::server {
@@ -37,6 +38,11 @@ struct ServerConfig {
     // "auto": start the headless EGL context for the GPU Voronoi culler, and fall back to the CPU
     // backend (logging why) when EGL cannot start; "off": CPU backend only.
     std::string gpu = "auto";
+    // Massive models: every subdirectory of this directory that holds a model store (written by
+    // `proxima import`) is served under the subdirectory's name; "" serves none.
+    std::string models_dir;
+    // The budget M of the one geometry cache shared by every model, verification and review room.
+    std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
 };
 
 // Overlays the keys of a JSON object onto `base`. Keys are the long flag names without the

@@ -415,4 +415,297 @@ void encode_limits(const Limits& limits, v1::Limits* out) {
     out->set_max_frames_in_flight(limits.max_frames_in_flight);
 }
 
+// --- Massive models ----------------------------------------------------------------------------
+
+StatusOr<massive::Affine> decode_transform(const v1::Transform& transform,
+                                           const std::string& what) {
+    massive::Affine out;
+    if (transform.m_size() != 12) {
+        return invalid_argument(what +
+                                ": a transform is 12 numbers (row-major 3x4: a00 a01 a02 tx "
+                                "a10 a11 a12 ty a20 a21 a22 tz), got " +
+                                std::to_string(transform.m_size()));
+    }
+    for (int i = 0; i < 12; ++i) {
+        if (!std::isfinite(transform.m(i))) {
+            return invalid_argument(what + ": transform entry " + std::to_string(i) +
+                                    " is not finite (NaN or Inf)");
+        }
+        out.m[static_cast<std::size_t>(i)] = transform.m(i);
+    }
+    return out;
+}
+
+void encode_transform(const massive::Affine& transform, v1::Transform* out) {
+    out->mutable_m()->Reserve(12);
+    for (double v : transform.m) {
+        out->add_m(v);
+    }
+}
+
+Status check_tolerance(double tolerance, const std::string& what) {
+    if (!std::isfinite(tolerance) || tolerance < 0.0) {
+        return invalid_argument(what + " must be a finite distance >= 0, got " +
+                                std::to_string(tolerance));
+    }
+    return {};
+}
+
+void encode_cache_stats(const massive::CacheStats& s, v1::CacheStats* out) {
+    out->set_budget_bytes(s.budget_bytes);
+    out->set_resident_bytes(s.resident_bytes);
+    out->set_peak_bytes(s.peak_bytes);
+    out->set_loads(s.loads);
+    out->set_triangles_loaded(s.triangles_loaded);
+    out->set_bytes_loaded(s.bytes_loaded);
+    out->set_hits(s.hits);
+    out->set_misses(s.misses);
+    out->set_waits(s.waits);
+    out->set_evictions(s.evictions);
+    out->set_prefetch_loads(s.prefetch_loads);
+    out->set_blocked_seconds(s.blocked_seconds);
+}
+
+void encode_model(const ModelEntry& model, v1::ModelInfo* out) {
+    const auto& s = model.store->summary();
+    out->set_name(model.name);
+    out->set_objects(s.objects);
+    out->set_pieces(s.pieces);
+    out->set_triangles(s.triangles);
+    out->set_generation(s.generation);
+    if (!model.box.empty()) {
+        encode_vec3(model.box.lo, out->mutable_box()->mutable_lo());
+        encode_vec3(model.box.hi, out->mutable_box()->mutable_hi());
+    }
+    out->set_vertices(s.vertices);
+    out->set_split_objects(s.split_objects);
+    out->set_chunks(s.chunks);
+    out->set_bytes(s.bytes);
+}
+
+void encode_unavailable_model(const UnavailableModel& model, v1::UnavailableModel* out) {
+    out->set_name(model.name);
+    out->set_status(model.status.to_string());
+}
+
+void encode_progress(const massive::Progress& p, v1::VerifyProgress* out) {
+    out->set_step(p.step);
+    out->set_done(p.done);
+    out->set_total(p.total);
+    out->set_unit(p.unit);
+}
+
+void encode_object_pair(const massive::ObjectPairResult& p, const massive::Store& store,
+                        v1::ObjectPairResult* out) {
+    const auto& objects = store.objects();
+    out->set_object_a(p.object_a);
+    out->set_object_b(p.object_b);
+    if (p.object_a < objects.size()) {
+        out->set_name_a(objects[p.object_a].name);
+    }
+    if (p.object_b < objects.size()) {
+        out->set_name_b(objects[p.object_b].name);
+    }
+    out->set_distance(p.distance);
+    out->set_triangle_a(p.triangle_a);
+    out->set_triangle_b(p.triangle_b);
+    encode_vec3(p.point_a, out->mutable_point_a());
+    encode_vec3(p.point_b, out->mutable_point_b());
+}
+
+void encode_verify_stats(const massive::VerifyStats& s, double server_seconds,
+                         v1::VerifyStats* out) {
+    out->set_objects(s.objects);
+    out->set_pieces(s.pieces);
+    out->set_model_triangles(s.model_triangles);
+    out->set_subgraphs(s.subgraphs);
+    out->set_edges(s.edges);
+    out->set_object_pairs(s.object_pairs);
+    out->set_pairs_found(s.pairs_found);
+    out->set_exact_tests(s.exact_tests);
+    out->set_plan_seconds(s.plan_seconds);
+    out->set_seconds(s.seconds);
+    out->set_schedule_from_store(s.schedule_from_store);
+    encode_cache_stats(s.cache, out->mutable_cache());
+    out->set_server_seconds(server_seconds);
+}
+
+StatusOr<ReviewRequest> decode_review_request(const v1::ReviewRequest& request) {
+    switch (request.request_case()) {
+        case v1::ReviewRequest::kJoin: {
+            const auto& j = request.join();
+            if (j.room().empty() || j.member().empty()) {
+                return invalid_argument("join: room and member must be non-empty names");
+            }
+            if (!j.has_avatar()) {
+                return invalid_argument("join: avatar (a Mesh) is required");
+            }
+            if (Status s = check_tolerance(j.tolerance(), "join.tolerance"); !s.ok()) {
+                return s;
+            }
+            auto avatar = decode_mesh(j.avatar(), "join.avatar");
+            if (!avatar.ok()) {
+                return avatar.status();
+            }
+            ReviewJoinRequest out;
+            out.room = j.room();
+            out.model = j.model();
+            out.member = j.member();
+            out.avatar = std::move(avatar).value();
+            out.tolerance = j.tolerance();
+            out.nearest = j.nearest();
+            return ReviewRequest(std::move(out));
+        }
+        case v1::ReviewRequest::kPose: {
+            const auto& p = request.pose();
+            const std::string what = "pose " + std::to_string(p.sequence());
+            if (!p.has_transform()) {
+                return invalid_argument(what + ": transform is required (12 numbers)");
+            }
+            auto t = decode_transform(p.transform(), what);
+            if (!t.ok()) {
+                return t.status();
+            }
+            return ReviewRequest(ReviewPoseRequest{p.sequence(), t.value()});
+        }
+        case v1::ReviewRequest::kEdit: {
+            const auto& e = request.edit();
+            const std::string what = "edit " + std::to_string(e.sequence());
+            RoomEdit out;
+            out.sequence = e.sequence();
+            switch (e.edit_case()) {
+                case v1::ReviewEdit::kMove: {
+                    out.what = EditKind::move;
+                    out.object = e.move().object();
+                    auto t = decode_transform(e.move().transform(), what + " (move)");
+                    if (!t.ok()) {
+                        return t.status();
+                    }
+                    out.transform = t.value();
+                    break;
+                }
+                case v1::ReviewEdit::kAdd: {
+                    out.what = EditKind::add;
+                    auto mesh = decode_mesh(e.add(), what + " (add)");
+                    if (!mesh.ok()) {
+                        return mesh.status();
+                    }
+                    out.added = std::move(mesh).value();
+                    break;
+                }
+                case v1::ReviewEdit::kRemove:
+                    out.what = EditKind::remove;
+                    out.object = e.remove().object();
+                    break;
+                default:
+                    return invalid_argument(what + ": empty edit (set move, add or remove)");
+            }
+            return ReviewRequest(std::move(out));
+        }
+        default:
+            return invalid_argument("empty review request (set join, pose or edit)");
+    }
+}
+
+namespace {
+
+void encode_hit(const massive::AvatarHit& h, const std::string& name, v1::AvatarHit* out) {
+    out->set_object(h.object);
+    out->set_object_name(name);
+    out->set_distance(h.distance);
+    out->set_object_triangle(h.object_triangle);
+    out->set_avatar_triangle(h.avatar_triangle);
+    encode_vec3(h.object_point, out->mutable_object_point());
+    encode_vec3(h.avatar_point, out->mutable_avatar_point());
+}
+
+void encode_summary(const PoseSummary& s, v1::PeerSummary* out) {
+    out->set_collisions(s.collisions);
+    out->set_within(s.within);
+    out->set_has_nearest(s.has_nearest);
+    if (s.has_nearest) {
+        out->set_nearest_object(s.nearest_object);
+        out->set_nearest_name(s.nearest_name);
+        out->set_nearest_distance(s.nearest_distance);
+    }
+}
+
+v1::EditKind edit_kind(EditKind k) {
+    switch (k) {
+        case EditKind::move:
+            return v1::EDIT_MOVE;
+        case EditKind::add:
+            return v1::EDIT_ADD;
+        case EditKind::remove:
+            return v1::EDIT_DELETE;
+    }
+    return v1::EDIT_MOVE;
+}
+
+}  // namespace
+
+void encode_room_event(const RoomEvent& event, v1::ReviewEvent* out) {
+    if (const auto* e = std::get_if<JoinedEvent>(&event)) {
+        auto* j = out->mutable_joined();
+        j->set_room(e->room);
+        j->set_model(e->model);
+        j->set_generation(e->generation);
+        for (const auto& [name, pose] : e->members) {
+            auto* m = j->add_members();
+            m->set_name(name);
+            m->set_has_pose(pose.has_pose);
+            if (pose.has_pose) {
+                m->set_sequence(pose.sequence);
+                encode_transform(pose.transform, m->mutable_transform());
+                encode_summary(pose.summary, m->mutable_summary());
+            }
+        }
+        j->set_model_version(e->model_version);
+        j->set_object_count(e->object_count);
+    } else if (const auto* e = std::get_if<PoseResult>(&event)) {
+        auto* r = out->mutable_result();
+        const auto& a = e->result;
+        r->set_sequence(e->sequence);
+        for (std::size_t i = 0; i < a.collisions.size(); ++i) {
+            encode_hit(a.collisions[i],
+                       i < e->collision_names.size() ? e->collision_names[i] : std::string(),
+                       r->add_collisions());
+        }
+        for (std::size_t i = 0; i < a.within.size(); ++i) {
+            encode_hit(a.within[i], i < e->within_names.size() ? e->within_names[i] : std::string(),
+                       r->add_within());
+        }
+        if (a.nearest) {
+            encode_hit(*a.nearest, e->nearest_name, r->mutable_nearest());
+        }
+        auto* st = r->mutable_stats();
+        st->set_candidate_pieces(a.candidate_pieces);
+        st->set_pieces_tested(a.pieces_tested);
+        st->set_exact_tests(a.exact_tests);
+        st->set_prefetch_hints(a.prefetch_hints);
+        st->set_seconds(a.seconds);
+        st->set_server_seconds(e->server_seconds);
+        r->set_model_version(e->model_version);
+    } else if (const auto* e = std::get_if<PeerEvent>(&event)) {
+        auto* p = out->mutable_peer();
+        p->set_member(e->member);
+        p->set_sequence(e->pose.sequence);
+        encode_transform(e->pose.transform, p->mutable_transform());
+        encode_summary(e->pose.summary, p->mutable_summary());
+        p->set_model_version(e->pose.model_version);
+    } else if (const auto* e = std::get_if<EditEvent>(&event)) {
+        auto* a = out->mutable_edit_applied();
+        a->set_member(e->member);
+        a->set_sequence(e->sequence);
+        a->set_what(edit_kind(e->what));
+        a->set_object(e->object);
+        a->set_object_name(e->object_name);
+        a->set_model_version(e->model_version);
+    } else if (const auto* e = std::get_if<MemberJoinedEvent>(&event)) {
+        out->mutable_member_joined()->set_member(e->member);
+    } else if (const auto* e = std::get_if<MemberLeftEvent>(&event)) {
+        out->mutable_member_left()->set_member(e->member);
+    }
+}
+
 }  // namespace proxima::server

@@ -11,17 +11,21 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include <grpcpp/support/status.h>
 
 #include "config.hpp"
+#include "models.hpp"
 #include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/massive/verify.hpp"
 #include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
 #include "proxima/v1/proxima.pb.h"
+#include "rooms.hpp"
 
 namespace proxima::server {
 
@@ -68,5 +72,42 @@ void encode_object(const SceneObject& object, v1::ObjectInfo* out);
 void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
                   std::uint64_t frames, v1::SceneInfo* out);
 void encode_limits(const Limits& limits, v1::Limits* out);
+
+// --- Massive models ---
+
+// Exactly 12 finite doubles, row-major 3x4. `what` names the field in the message.
+StatusOr<massive::Affine> decode_transform(const v1::Transform& transform, const std::string& what);
+void encode_transform(const massive::Affine& transform, v1::Transform* out);
+// A finite distance >= 0.
+Status check_tolerance(double tolerance, const std::string& what);
+
+void encode_cache_stats(const massive::CacheStats& stats, v1::CacheStats* out);
+void encode_model(const ModelEntry& model, v1::ModelInfo* out);
+void encode_unavailable_model(const UnavailableModel& model, v1::UnavailableModel* out);
+
+void encode_progress(const massive::Progress& progress, v1::VerifyProgress* out);
+// Names come from the store's objects.
+void encode_object_pair(const massive::ObjectPairResult& pair, const massive::Store& store,
+                        v1::ObjectPairResult* out);
+void encode_verify_stats(const massive::VerifyStats& stats, double server_seconds,
+                         v1::VerifyStats* out);
+
+// A Review request in engine terms. The avatar and an added object are decoded with
+// decode_mesh (wire format); the engine validates them (validate_mesh) before anything changes.
+struct ReviewJoinRequest {
+    std::string room;
+    std::string model;
+    std::string member;
+    NamedMesh avatar;
+    double tolerance = 0.0;
+    bool nearest = false;
+};
+struct ReviewPoseRequest {
+    std::uint64_t sequence = 0;
+    massive::Affine transform;
+};
+using ReviewRequest = std::variant<ReviewJoinRequest, ReviewPoseRequest, RoomEdit>;
+StatusOr<ReviewRequest> decode_review_request(const v1::ReviewRequest& request);
+void encode_room_event(const RoomEvent& event, v1::ReviewEvent* out);
 
 }  // namespace proxima::server

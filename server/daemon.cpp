@@ -31,6 +31,9 @@ Daemon::~Daemon() {
 }
 
 StatusOr<std::string> Daemon::start() {
+    if (Status s = m_service->start_models(); !s.ok()) {
+        return s;
+    }
     // Both apply to servers built afterwards; the health service answers grpc.health.v1 for ""
     // and for proxima.v1.Proximity.
     grpc::EnableDefaultHealthCheckService(true);
@@ -64,11 +67,12 @@ StatusOr<std::string> Daemon::start() {
     spdlog::info(
         "proximad {} serving proxima.v1 on {} backend=\"{}\" gl_renderer=\"{}\" "
         "max_scenes={} max_objects_per_scene={} max_triangles_per_scene={} "
-        "max_message_bytes={} max_frames_in_flight={} drain_seconds={}",
+        "max_message_bytes={} max_frames_in_flight={} drain_seconds={} models=\"{}\" "
+        "cache_bytes={}",
         PROXIMA_VERSION, address, m_service->proximity_backend(),
         m_service->gl_renderer().empty() ? "none" : m_service->gl_renderer(), l.max_scenes,
         l.max_objects_per_scene, l.max_triangles_per_scene, l.max_message_bytes,
-        l.max_frames_in_flight, m_config.drain_seconds);
+        l.max_frames_in_flight, m_config.drain_seconds, m_config.models_dir, m_config.cache_bytes);
     return address;
 }
 

@@ -19,117 +19,12 @@
 #include "frames.hpp"
 #include "proxima/gpu/egl_backend.hpp"
 #include "scene_registry.hpp"
+#include "service_internal.hpp"
 #include "worker_pool.hpp"
 
 namespace proxima::server {
 
-class FrameStreamReactor;
-
-struct ProximityService::Shared {
-    explicit Shared(const ServerConfig& c)
-        : config(c),
-          scenes(c.limits.max_scenes),
-          pool(c.worker_threads != 0 ? c.worker_threads
-                                     : std::max(4u, std::thread::hardware_concurrency())) {}
-
-    const ServerConfig config;
-    SceneRegistry scenes;
-    // The GPU backend of the Voronoi culler: one EGL context, owned by its own thread, shared by
-    // every scene (GPU jobs run one at a time). Null when EGL did not start or --gpu off.
-    std::shared_ptr<dvd::Backend> gpu;
-    std::string gl_renderer;
-
-    // Every reactor enters when gRPC creates it and leaves in its OnDone: the drain waits for
-    // the count to reach zero. Returns false once draining, when the call must be refused (with
-    // UNAVAILABLE; it still leaves in OnDone).
-    bool enter_call(FrameStreamReactor* stream = nullptr) {
-        std::lock_guard lock(calls_mu);
-        ++calls;
-        if (stream != nullptr) {
-            streams.insert(stream);
-        }
-        return !draining;
-    }
-    void leave_call(FrameStreamReactor* stream = nullptr) {
-        std::lock_guard lock(calls_mu);
-        --calls;
-        if (stream != nullptr) {
-            streams.erase(stream);
-        }
-        if (calls == 0) {
-            calls_idle.notify_all();
-        }
-    }
-
-    mutable std::mutex calls_mu;
-    std::condition_variable calls_idle;
-    std::size_t calls = 0;                            // guarded by calls_mu
-    std::unordered_set<FrameStreamReactor*> streams;  // guarded by calls_mu: live streams
-    bool draining = false;                            // guarded by calls_mu
-
-    // Last member, so it is destroyed first: its destructor runs queued tasks, which use the
-    // members above.
-    WorkerPool pool;
-};
-
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double milliseconds_since(Clock::time_point start) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-// Maps the call's deadline onto the token, so the engine stops when the caller's time is up
-// rather than when gRPC notices.
-void apply_deadline(CancelToken& token, const grpc::CallbackServerContext& context) {
-    const auto deadline = context.deadline();
-    const auto now = std::chrono::system_clock::now();
-    // No deadline reads as time_point::max(); anything a year out is as good as none.
-    if (deadline > now + std::chrono::hours(24 * 365)) {
-        return;
-    }
-    token.set_deadline(Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - now));
-}
-
-// Exceptions never cross into gRPC: the engine throws only for bugs and exhausted memory.
-template <class Fn>
-Status guarded(Fn&& fn) {
-    try {
-        return fn();
-    } catch (const std::bad_alloc&) {
-        return {StatusCode::resource_exhausted, "out of memory while serving the request"};
-    } catch (const std::exception& e) {
-        return {StatusCode::internal, std::string("internal error: ") + e.what()};
-    }
-}
-
-// One line per finished call. Rejections (the caller's mistake or a limit) are warnings; a
-// cancelled call or an expired deadline is the caller's choice, so it is info.
-void log_call(const char* method, const std::string& peer, const std::string& scene,
-              Clock::time_point start, const Status& status, const std::string& extra = {}) {
-    const double ms = milliseconds_since(start);
-    const auto level =
-        status.ok() ? spdlog::level::debug
-        : (status.code() == StatusCode::cancelled || status.code() == StatusCode::deadline_exceeded)
-            ? spdlog::level::info
-            : spdlog::level::warn;
-    if (status.ok()) {
-        spdlog::log(level, "call method={} peer={} scene={} status=OK duration_ms={:.3f}{}", method,
-                    peer, scene.empty() ? "-" : scene, ms, extra);
-    } else {
-        spdlog::log(level,
-                    "rejected method={} peer={} scene={} status={} duration_ms={:.3f}{} "
-                    "message=\"{}\"",
-                    method, peer, scene.empty() ? "-" : scene, status_code_name(status.code()), ms,
-                    extra, status.message());
-    }
-}
-
-Status shutting_down() {
-    return {StatusCode::unavailable,
-            "proximad is shutting down; reconnect (to another instance) to go on"};
-}
 
 Status unknown_scene(const std::string& id) {
     if (id.empty()) {
@@ -138,54 +33,6 @@ Status unknown_scene(const std::string& id) {
     return not_found("scene " + id +
                      " does not exist (never created, deleted, or private to a frame stream)");
 }
-
-// A unary call: the method fills the response on the worker pool (or inline when it is cheap)
-// and calls complete() last. The reactor deletes itself in OnDone, which gRPC may run as soon as
-// Finish is called, so nothing may touch it after complete().
-//
-// While the daemon drains, a new call is refused at once: the constructor completes it with
-// UNAVAILABLE and refused() tells the method to return without doing anything. (gRPC runs OnDone
-// only after the method has returned the reactor, so reading refused() is safe.)
-class UnaryCall final : public grpc::ServerUnaryReactor {
-  public:
-    UnaryCall(ProximityService::Shared& shared, grpc::CallbackServerContext* context,
-              const char* method, std::string scene)
-        : m_shared(shared),
-          m_method(method),
-          m_peer(context->peer()),
-          m_scene(std::move(scene)),
-          m_start(Clock::now()) {
-        apply_deadline(m_cancel, *context);
-        m_refused = !m_shared.enter_call();
-        if (m_refused) {
-            complete(shutting_down());
-        }
-    }
-
-    bool refused() const { return m_refused; }
-    const CancelToken& cancel() const { return m_cancel; }
-    void set_scene(std::string scene) { m_scene = std::move(scene); }
-
-    void complete(const Status& status, const std::string& extra = {}) {
-        log_call(m_method, m_peer, m_scene, m_start, status, extra);
-        Finish(to_grpc_status(status));
-    }
-
-    void OnCancel() override { m_cancel.cancel(); }
-    void OnDone() override {
-        m_shared.leave_call();
-        delete this;
-    }
-
-  private:
-    ProximityService::Shared& m_shared;
-    bool m_refused = false;
-    const char* m_method;
-    std::string m_peer;
-    std::string m_scene;
-    Clock::time_point m_start;
-    CancelToken m_cancel;
-};
 
 // UploadObject: a header, then vertex and index bytes in chunks. Sizes are checked as bytes
 // arrive (an upload that sends more than its header announced is refused at once, before it
@@ -402,7 +249,8 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
 // Every state change happens under m_mu. Finish is called exactly once, by
 // maybe_finish_locked(), and only when no worker task runs and no write is outstanding; OnDone
 // takes m_mu once before deleting the reactor, so the thread that called Finish has let go.
-class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::FrameResult> {
+class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::FrameResult>,
+                                 public DrainableStream {
   public:
     FrameStreamReactor(ProximityService::Shared& shared, grpc::CallbackServerContext* context)
         : m_shared(shared), m_peer(context->peer()), m_start(Clock::now()) {
@@ -491,7 +339,7 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
     }
 
     // Shutdown: read no more; finish once what was read is answered (now, when idle).
-    void drain() {
+    void drain() override {
         std::lock_guard lock(m_mu);
         m_draining = true;
         maybe_finish_locked();

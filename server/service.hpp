@@ -11,6 +11,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "config.hpp"
+#include "proxima/status.hpp"
 #include "proxima/v1/proxima.grpc.pb.h"
 
 namespace proxima::server {
@@ -38,6 +39,19 @@ class ProximityService final : public v1::Proximity::CallbackService {
         grpc::CallbackServerContext* context) override;
     grpc::ServerUnaryReactor* Query(grpc::CallbackServerContext* context, const v1::Frame* request,
                                     v1::FrameResult* response) override;
+
+    // Massive models, verification and review rooms (massive_service.cpp).
+    grpc::ServerUnaryReactor* ListModels(grpc::CallbackServerContext* context,
+                                         const v1::ListModelsRequest* request,
+                                         v1::ListModelsResponse* response) override;
+    grpc::ServerWriteReactor<v1::VerifyModelEvent>* VerifyModel(
+        grpc::CallbackServerContext* context, const v1::VerifyModelRequest* request) override;
+    grpc::ServerBidiReactor<v1::ReviewRequest, v1::ReviewEvent>* Review(
+        grpc::CallbackServerContext* context) override;
+
+    // Opens the models under --models (before the server starts): unavailable when the
+    // directory cannot be listed. A store that cannot be opened is logged and skipped.
+    Status start_models();
 
     // The first step of a graceful shutdown: new calls are refused with UNAVAILABLE, idle
     // streams are finished with UNAVAILABLE now, busy ones once the frames they already read are

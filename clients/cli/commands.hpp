@@ -18,6 +18,15 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code);
 // proxima ccd: continuous collisions between two frames of mesh files
 // (clients/cli/ccd_command.cpp).
 void add_ccd_command(CLI::App& app, int& exit_code);
+// proxima import and proxima store-info: the on-disk model store
+// (clients/cli/import_command.cpp).
+void add_import_command(CLI::App& app, int& exit_code);
+// proxima generate plant|building: deterministic test models as files
+// (clients/cli/generate_command.cpp).
+void add_generate_command(CLI::App& app, int& exit_code);
+// proxima models, verify and review: massive models on a daemon or in a local store
+// (clients/cli/massive_command.cpp).
+void add_massive_commands(CLI::App& app, int& exit_code);
 
 // One frame on the daemon in a scene of its own (clients/cli/remote.cpp): creates the scene with
 // `objects` in input order (so result indices mean what they mean locally), lets `fill` complete

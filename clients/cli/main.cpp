@@ -653,6 +653,9 @@ int main(int argc, char** argv) {
         int command_exit = -1;
         cli::add_ccd_command(app, command_exit);
         cli::add_ccd_queries_command(app, command_exit);
+        cli::add_import_command(app, command_exit);
+        cli::add_generate_command(app, command_exit);
+        cli::add_massive_commands(app, command_exit);
 
         CLI11_PARSE(app, argc, argv);
         if (command_exit >= 0) {

@@ -745,4 +745,255 @@ RemoteScene decode_scene(const pb::SceneInfo& info) {
     return out;
 }
 
+// --- Massive models ----------------------------------------------------------------------------
+
+namespace {
+
+Status malformed_answer(const std::string& what) {
+    return {StatusCode::internal, "malformed answer from the server: " + what};
+}
+
+}  // namespace
+
+void encode_transform(const massive::Affine& transform, pb::Transform* out) {
+    out->mutable_m()->Reserve(12);
+    for (double v : transform.m) {
+        out->add_m(v);
+    }
+}
+
+StatusOr<massive::Affine> decode_transform(const pb::Transform& transform,
+                                           const std::string& what) {
+    if (transform.m_size() != 12) {
+        return malformed_answer(what + ": a transform of " + std::to_string(transform.m_size()) +
+                                " numbers (12 expected)");
+    }
+    massive::Affine out;
+    for (int i = 0; i < 12; ++i) {
+        out.m[static_cast<std::size_t>(i)] = transform.m(i);
+    }
+    return out;
+}
+
+massive::CacheStats decode_cache_stats(const pb::CacheStats& s) {
+    massive::CacheStats out;
+    out.budget_bytes = s.budget_bytes();
+    out.resident_bytes = s.resident_bytes();
+    out.peak_bytes = s.peak_bytes();
+    out.loads = s.loads();
+    out.triangles_loaded = s.triangles_loaded();
+    out.bytes_loaded = s.bytes_loaded();
+    out.hits = s.hits();
+    out.misses = s.misses();
+    out.waits = s.waits();
+    out.evictions = s.evictions();
+    out.prefetch_loads = s.prefetch_loads();
+    out.blocked_seconds = s.blocked_seconds();
+    return out;
+}
+
+RemoteModelList decode_model_list(const pb::ListModelsResponse& response) {
+    RemoteModelList out;
+    out.models_dir = response.models_dir();
+    for (const auto& m : response.models()) {
+        RemoteModel r;
+        r.name = m.name();
+        r.objects = m.objects();
+        r.pieces = m.pieces();
+        r.triangles = m.triangles();
+        r.vertices = m.vertices();
+        r.split_objects = m.split_objects();
+        r.chunks = m.chunks();
+        r.bytes = m.bytes();
+        r.generation = m.generation();
+        if (m.has_box()) {
+            r.box.lo = decode_vec3(m.box().lo());
+            r.box.hi = decode_vec3(m.box().hi());
+        }
+        out.models.push_back(std::move(r));
+    }
+    for (const auto& u : response.unavailable()) {
+        out.unavailable.emplace_back(u.name(), u.status());
+    }
+    out.cache_budget_bytes = response.cache_budget_bytes();
+    out.cache = decode_cache_stats(response.cache());
+    return out;
+}
+
+NamedObjectPair decode_object_pair(const pb::ObjectPairResult& p) {
+    NamedObjectPair out;
+    out.pair.object_a = p.object_a();
+    out.pair.object_b = p.object_b();
+    out.pair.distance = p.distance();
+    out.pair.triangle_a = p.triangle_a();
+    out.pair.triangle_b = p.triangle_b();
+    out.pair.point_a = decode_vec3(p.point_a());
+    out.pair.point_b = decode_vec3(p.point_b());
+    out.name_a = p.name_a();
+    out.name_b = p.name_b();
+    return out;
+}
+
+massive::Progress decode_progress(const pb::VerifyProgress& p) {
+    return {p.step(), p.done(), p.total(), p.unit()};
+}
+
+RemoteVerifySummary decode_verify_summary(const pb::VerifyStats& s) {
+    RemoteVerifySummary out;
+    auto& st = out.stats;
+    st.objects = s.objects();
+    st.pieces = s.pieces();
+    st.model_triangles = s.model_triangles();
+    st.subgraphs = s.subgraphs();
+    st.edges = s.edges();
+    st.object_pairs = s.object_pairs();
+    st.pairs_found = s.pairs_found();
+    st.exact_tests = s.exact_tests();
+    st.plan_seconds = s.plan_seconds();
+    st.seconds = s.seconds();
+    st.schedule_from_store = s.schedule_from_store();
+    st.cache = decode_cache_stats(s.cache());
+    out.server_seconds = s.server_seconds();
+    return out;
+}
+
+void encode_review_join(const ReviewJoin& join, bool float32, pb::ReviewRequest* out) {
+    auto* j = out->mutable_join();
+    j->set_room(join.room);
+    j->set_model(join.model);
+    j->set_member(join.member);
+    encode_mesh(join.avatar, float32, j->mutable_avatar());
+    j->set_tolerance(join.tolerance);
+    j->set_nearest(join.nearest);
+}
+
+namespace {
+
+massive::AvatarHit decode_hit(const pb::AvatarHit& h, std::string* name) {
+    massive::AvatarHit out;
+    out.object = h.object();
+    out.distance = h.distance();
+    out.object_triangle = h.object_triangle();
+    out.avatar_triangle = h.avatar_triangle();
+    out.object_point = decode_vec3(h.object_point());
+    out.avatar_point = decode_vec3(h.avatar_point());
+    *name = h.object_name();
+    return out;
+}
+
+ReviewPoseSummary decode_summary(const pb::PeerSummary& s) {
+    ReviewPoseSummary out;
+    out.collisions = s.collisions();
+    out.within = s.within();
+    out.has_nearest = s.has_nearest();
+    out.nearest_object = s.nearest_object();
+    out.nearest_name = s.nearest_name();
+    out.nearest_distance = s.nearest_distance();
+    return out;
+}
+
+}  // namespace
+
+StatusOr<ReviewEvent> decode_review_event(const pb::ReviewEvent& event) {
+    ReviewEvent out;
+    switch (event.event_case()) {
+        case pb::ReviewEvent::kJoined: {
+            out.kind = ReviewEvent::Kind::joined;
+            const auto& j = event.joined();
+            out.joined.room = j.room();
+            out.joined.model = j.model();
+            out.joined.generation = j.generation();
+            for (const auto& m : j.members()) {
+                ReviewMemberInfo info;
+                info.name = m.name();
+                info.has_pose = m.has_pose();
+                if (info.has_pose) {
+                    info.sequence = m.sequence();
+                    auto t = decode_transform(m.transform(), "joined member '" + m.name() + "'");
+                    if (!t.ok()) {
+                        return t.status();
+                    }
+                    info.transform = t.value();
+                    info.summary = decode_summary(m.summary());
+                }
+                out.joined.members.push_back(std::move(info));
+            }
+            out.joined.model_version = j.model_version();
+            out.joined.object_count = j.object_count();
+            return out;
+        }
+        case pb::ReviewEvent::kResult: {
+            out.kind = ReviewEvent::Kind::result;
+            const auto& r = event.result();
+            auto& o = out.result;
+            o.sequence = r.sequence();
+            for (const auto& h : r.collisions()) {
+                o.result.collisions.push_back(decode_hit(h, &o.collision_names.emplace_back()));
+            }
+            for (const auto& h : r.within()) {
+                o.result.within.push_back(decode_hit(h, &o.within_names.emplace_back()));
+            }
+            if (r.has_nearest()) {
+                o.result.nearest = decode_hit(r.nearest(), &o.nearest_name);
+            }
+            o.result.candidate_pieces = r.stats().candidate_pieces();
+            o.result.pieces_tested = r.stats().pieces_tested();
+            o.result.exact_tests = r.stats().exact_tests();
+            o.result.prefetch_hints = r.stats().prefetch_hints();
+            o.result.seconds = r.stats().seconds();
+            o.server_seconds = r.stats().server_seconds();
+            o.model_version = r.model_version();
+            return out;
+        }
+        case pb::ReviewEvent::kPeer: {
+            out.kind = ReviewEvent::Kind::peer;
+            const auto& p = event.peer();
+            out.peer.member = p.member();
+            out.peer.sequence = p.sequence();
+            auto t = decode_transform(p.transform(), "peer '" + p.member() + "'");
+            if (!t.ok()) {
+                return t.status();
+            }
+            out.peer.transform = t.value();
+            out.peer.summary = decode_summary(p.summary());
+            out.peer.model_version = p.model_version();
+            return out;
+        }
+        case pb::ReviewEvent::kEditApplied: {
+            out.kind = ReviewEvent::Kind::edit_applied;
+            const auto& e = event.edit_applied();
+            out.edit.member = e.member();
+            out.edit.sequence = e.sequence();
+            switch (e.what()) {
+                case pb::EDIT_MOVE:
+                    out.edit.what = ReviewEditKind::move;
+                    break;
+                case pb::EDIT_ADD:
+                    out.edit.what = ReviewEditKind::add;
+                    break;
+                case pb::EDIT_DELETE:
+                    out.edit.what = ReviewEditKind::remove;
+                    break;
+                default:
+                    return malformed_answer("edit_applied: unknown edit kind " +
+                                            std::to_string(static_cast<int>(e.what())));
+            }
+            out.edit.object = e.object();
+            out.edit.object_name = e.object_name();
+            out.edit.model_version = e.model_version();
+            return out;
+        }
+        case pb::ReviewEvent::kMemberJoined:
+            out.kind = ReviewEvent::Kind::member_joined;
+            out.member = event.member_joined().member();
+            return out;
+        case pb::ReviewEvent::kMemberLeft:
+            out.kind = ReviewEvent::Kind::member_left;
+            out.member = event.member_left().member();
+            return out;
+        default:
+            return malformed_answer("an empty review event");
+    }
+}
+
 }  // namespace proxima::client::detail

@@ -75,4 +75,18 @@ RemoteServerInfo decode_server_info(const pb::ServerInfo& info);
 RemoteObject decode_object(const pb::ObjectInfo& info);
 RemoteScene decode_scene(const pb::SceneInfo& info);
 
+// --- Massive models ---
+
+// 12 doubles, row-major 3x4; decoding checks the count (a malformed answer is internal).
+void encode_transform(const massive::Affine& transform, pb::Transform* out);
+StatusOr<massive::Affine> decode_transform(const pb::Transform& transform, const std::string& what);
+massive::CacheStats decode_cache_stats(const pb::CacheStats& stats);
+RemoteModelList decode_model_list(const pb::ListModelsResponse& response);
+NamedObjectPair decode_object_pair(const pb::ObjectPairResult& pair);
+massive::Progress decode_progress(const pb::VerifyProgress& progress);
+RemoteVerifySummary decode_verify_summary(const pb::VerifyStats& stats);
+
+void encode_review_join(const ReviewJoin& join, bool float32, pb::ReviewRequest* out);
+StatusOr<ReviewEvent> decode_review_event(const pb::ReviewEvent& event);
+
 }  // namespace proxima::client::detail

@@ -1,7 +1,10 @@
 #include "client/proxima_client.hpp"
 
 #include <algorithm>
+#include <condition_variable>
 #include <deque>
+#include <mutex>
+#include <thread>
 #include <utility>
 
 #include <grpcpp/grpcpp.h>
@@ -332,6 +335,288 @@ Status FrameStream::finish() {
 }
 
 void FrameStream::cancel() {
+    m_impl->context.TryCancel();
+}
+
+// --- Massive models ----------------------------------------------------------------------------
+
+StatusOr<RemoteModelList> Client::list_models() {
+    grpc::ClientContext context;
+    m_impl->prepare(context);
+    pb::ListModelsResponse response;
+    if (auto st = m_impl->stub->ListModels(&context, pb::ListModelsRequest(), &response);
+        !st.ok()) {
+        return from_grpc(st);
+    }
+    return detail::decode_model_list(response);
+}
+
+StatusOr<RemoteVerifySummary> Client::verify_model(
+    const std::string& model, double tolerance,
+    const std::function<bool(const VerifyEvent&)>& on_event, std::chrono::milliseconds timeout) {
+    grpc::ClientContext context;
+    if (timeout.count() > 0) {
+        context.set_deadline(deadline_after(timeout));
+    }
+    pb::VerifyModelRequest request;
+    request.set_model(model);
+    request.set_tolerance(tolerance);
+    auto reader = m_impl->stub->VerifyModel(&context, request);
+    pb::VerifyModelEvent event;
+    std::optional<RemoteVerifySummary> summary;
+    bool stopped = false;
+    while (reader->Read(&event)) {
+        if (stopped) {
+            continue;  // cancelled: drain what is in flight until the call ends
+        }
+        VerifyEvent out;
+        switch (event.event_case()) {
+            case pb::VerifyModelEvent::kProgress:
+                out.kind = VerifyEvent::Kind::progress;
+                out.progress = detail::decode_progress(event.progress());
+                break;
+            case pb::VerifyModelEvent::kPair:
+                out.kind = VerifyEvent::Kind::pair;
+                out.pair = detail::decode_object_pair(event.pair());
+                break;
+            case pb::VerifyModelEvent::kSummary:
+                summary = detail::decode_verify_summary(event.summary());
+                continue;
+            default:
+                continue;
+        }
+        if (on_event && !on_event(out)) {
+            stopped = true;
+            context.TryCancel();
+        }
+    }
+    Status status = from_grpc(reader->Finish());
+    if (stopped) {
+        return Status(StatusCode::cancelled, "verification cancelled by the caller");
+    }
+    if (!status.ok()) {
+        return status;
+    }
+    if (!summary) {
+        return Status(StatusCode::internal, "the server ended VerifyModel without a summary");
+    }
+    return *summary;
+}
+
+// A reader thread moves events from the stream into `events` (at most MAX_QUEUED; past that it
+// waits for next(), so the daemon's flow control and bounds apply rather than this queue
+// growing). Writes happen on the caller's thread under `write_mu`, which the reader also takes
+// for Finish (gRPC wants no write in progress while Finish runs).
+struct ReviewSession::Impl {
+    static constexpr std::size_t MAX_QUEUED = 64;
+
+    bool float32 = false;
+    grpc::ClientContext context;
+    std::unique_ptr<grpc::ClientReaderWriter<pb::ReviewRequest, pb::ReviewEvent>> stream;
+    ReviewJoined joined;
+
+    std::mutex write_mu;
+    bool writes_done = false;  // guarded by write_mu
+
+    std::mutex mu;
+    std::condition_variable changed;
+    std::deque<StatusOr<ReviewEvent>> events;  // guarded by mu
+    bool ended = false;                        // guarded by mu: Finish has returned
+    bool discard = false;                      // guarded by mu: drop events (finishing)
+    Status final_status;                       // guarded by mu
+    std::thread reader;
+
+    void read_loop() {
+        pb::ReviewEvent event;
+        while (stream->Read(&event)) {
+            auto decoded = detail::decode_review_event(event);
+            std::unique_lock lock(mu);
+            changed.wait(lock, [&] { return discard || events.size() < MAX_QUEUED; });
+            if (!discard) {
+                events.push_back(std::move(decoded));
+                changed.notify_all();
+            }
+        }
+        Status status;
+        {
+            std::lock_guard writes(write_mu);
+            status = from_grpc(stream->Finish());
+            writes_done = true;  // no write after Finish
+        }
+        std::lock_guard lock(mu);
+        ended = true;
+        final_status = status;
+        changed.notify_all();
+    }
+
+    // A failed write means the daemon ended the call: the reader collects its status, which
+    // is the answer here once known (and always from next()).
+    Status write(const pb::ReviewRequest& request) {
+        {
+            std::lock_guard writes(write_mu);
+            if (!writes_done) {
+                if (stream->Write(request)) {
+                    return {};
+                }
+                writes_done = true;
+            }
+        }
+        std::lock_guard lock(mu);
+        if (ended && !final_status.ok()) {
+            return final_status;
+        }
+        return {StatusCode::failed_precondition,
+                ended ? "the review stream has ended"
+                      : "the review stream is ending (next() returns its final status)"};
+    }
+
+    void stop_reader() {
+        if (reader.joinable()) {
+            reader.join();
+        }
+    }
+};
+
+StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& join,
+                                                             std::chrono::milliseconds timeout) {
+    auto impl = std::make_unique<ReviewSession::Impl>();
+    impl->float32 = m_impl->options.float32_vertices;
+    impl->stream = m_impl->stub->Review(&impl->context);
+    if (!impl->stream) {
+        return Status(StatusCode::internal, "could not start a review stream");
+    }
+    pb::ReviewRequest request;
+    detail::encode_review_join(join, impl->float32, &request);
+    auto* raw = impl.get();
+    impl->reader = std::thread([raw] { raw->read_loop(); });
+    auto session = std::make_unique<ReviewSession>(std::move(impl));
+    if (Status s = raw->write(request); !s.ok()) {
+        return s;
+    }
+    auto first = session->next(timeout);
+    if (!first.ok()) {
+        return first.status();
+    }
+    if (first->kind != ReviewEvent::Kind::joined) {
+        return Status(StatusCode::internal, "the server answered join with another event");
+    }
+    raw->joined = std::move(first->joined);
+    return session;
+}
+
+ReviewSession::ReviewSession(std::unique_ptr<Impl> impl) : m_impl(std::move(impl)) {}
+
+ReviewSession::~ReviewSession() {
+    if (!m_impl) {
+        return;
+    }
+    {
+        std::lock_guard lock(m_impl->mu);
+        m_impl->discard = true;
+        m_impl->changed.notify_all();
+        if (!m_impl->ended) {
+            m_impl->context.TryCancel();
+        }
+    }
+    m_impl->stop_reader();
+}
+
+const ReviewJoined& ReviewSession::joined() const {
+    return m_impl->joined;
+}
+
+Status ReviewSession::send_pose(std::uint64_t sequence, const massive::Affine& pose) {
+    pb::ReviewRequest request;
+    request.mutable_pose()->set_sequence(sequence);
+    detail::encode_transform(pose, request.mutable_pose()->mutable_transform());
+    return m_impl->write(request);
+}
+
+Status ReviewSession::move_object(std::uint64_t sequence, std::uint32_t object,
+                                  const massive::Affine& transform) {
+    pb::ReviewRequest request;
+    auto* edit = request.mutable_edit();
+    edit->set_sequence(sequence);
+    edit->mutable_move()->set_object(object);
+    detail::encode_transform(transform, edit->mutable_move()->mutable_transform());
+    return m_impl->write(request);
+}
+
+Status ReviewSession::add_object(std::uint64_t sequence, const NamedMesh& object) {
+    pb::ReviewRequest request;
+    auto* edit = request.mutable_edit();
+    edit->set_sequence(sequence);
+    detail::encode_mesh(object, m_impl->float32, edit->mutable_add());
+    return m_impl->write(request);
+}
+
+Status ReviewSession::delete_object(std::uint64_t sequence, std::uint32_t object) {
+    pb::ReviewRequest request;
+    auto* edit = request.mutable_edit();
+    edit->set_sequence(sequence);
+    edit->mutable_remove()->set_object(object);
+    return m_impl->write(request);
+}
+
+StatusOr<ReviewEvent> ReviewSession::next(std::chrono::milliseconds timeout) {
+    auto& s = *m_impl;
+    std::unique_lock lock(s.mu);
+    if (!s.changed.wait_for(lock, timeout, [&] { return !s.events.empty() || s.ended; })) {
+        return Status(StatusCode::deadline_exceeded,
+                      "no review event within " + std::to_string(timeout.count()) + " ms");
+    }
+    if (!s.events.empty()) {
+        auto event = std::move(s.events.front());
+        s.events.pop_front();
+        s.changed.notify_all();
+        return event;
+    }
+    return s.final_status.ok()
+               ? Status(StatusCode::failed_precondition, "the review stream has ended")
+               : s.final_status;
+}
+
+StatusOr<ReviewPoseResult> ReviewSession::wait_result(
+    std::uint64_t sequence, const std::function<void(const ReviewEvent&)>& other,
+    std::chrono::milliseconds timeout) {
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    for (;;) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+            until - std::chrono::steady_clock::now());
+        auto event = next(std::max(left, std::chrono::milliseconds(0)));
+        if (!event.ok()) {
+            return event.status();
+        }
+        if (event->kind == ReviewEvent::Kind::result && event->result.sequence == sequence) {
+            return std::move(event->result);
+        }
+        if (other) {
+            other(event.value());
+        }
+    }
+}
+
+Status ReviewSession::finish() {
+    auto& s = *m_impl;
+    {
+        std::lock_guard writes(s.write_mu);
+        if (!s.writes_done) {
+            s.stream->WritesDone();
+            s.writes_done = true;
+        }
+    }
+    {
+        std::lock_guard lock(s.mu);
+        s.discard = true;
+        s.events.clear();
+        s.changed.notify_all();
+    }
+    s.stop_reader();
+    std::lock_guard lock(s.mu);
+    return s.final_status;
+}
+
+void ReviewSession::cancel() {
     m_impl->context.TryCancel();
 }
 

@@ -6,12 +6,15 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/massive/avatar.hpp"
+#include "proxima/massive/verify.hpp"
 #include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scene.hpp"
@@ -86,7 +89,128 @@ struct FrameResponse {
     double server_seconds = 0;
 };
 
+// --- Massive models (ListModels, VerifyModel, Review) ---
+
+struct RemoteModel {
+    std::string name;  // the store's subdirectory of the daemon's --models DIR
+    std::uint64_t objects = 0;
+    std::uint64_t pieces = 0;
+    std::uint64_t triangles = 0;
+    std::uint64_t vertices = 0;
+    std::uint64_t split_objects = 0;
+    std::uint64_t chunks = 0;
+    std::uint64_t bytes = 0;
+    std::string generation;
+    Aabb box;
+};
+
+struct RemoteModelList {
+    std::string models_dir;  // "" when the daemon serves no models
+    std::vector<RemoteModel> models;
+    // Stores the daemon could not open: name and status ("DATA_LOSS: ...").
+    std::vector<std::pair<std::string, std::string>> unavailable;
+    std::uint64_t cache_budget_bytes = 0;
+    massive::CacheStats cache;
+};
+
+// An object pair within the tolerance, with the objects' names.
+struct NamedObjectPair {
+    massive::ObjectPairResult pair;
+    std::string name_a;
+    std::string name_b;
+};
+
+struct VerifyEvent {
+    enum class Kind { progress, pair };
+    Kind kind = Kind::progress;
+    massive::Progress progress;  // kind == progress (the latest; the daemon coalesces them)
+    NamedObjectPair pair;        // kind == pair
+};
+
+struct RemoteVerifySummary {
+    massive::VerifyStats stats;
+    double server_seconds = 0;
+};
+
+struct ReviewJoin {
+    std::string room;
+    std::string model;
+    std::string member;
+    NamedMesh avatar;  // in its own coordinates; poses place it
+    double tolerance = 0.0;
+    bool nearest = true;
+};
+
+// What members see of each other's poses.
+struct ReviewPoseSummary {
+    std::uint32_t collisions = 0;
+    std::uint32_t within = 0;
+    bool has_nearest = false;
+    std::uint32_t nearest_object = 0;
+    std::string nearest_name;
+    double nearest_distance = 0.0;
+};
+
+struct ReviewMemberInfo {
+    std::string name;
+    bool has_pose = false;
+    std::uint64_t sequence = 0;
+    massive::Affine transform;
+    ReviewPoseSummary summary;
+};
+
+struct ReviewJoined {
+    std::string room;
+    std::string model;
+    std::string generation;
+    std::vector<ReviewMemberInfo> members;  // this member last
+    std::uint64_t model_version = 0;
+    std::uint32_t object_count = 0;
+};
+
+// A pose's answer, in the engine's type (object indices are the room's: stored objects, then
+// added ones), with the objects' names beside it.
+struct ReviewPoseResult {
+    std::uint64_t sequence = 0;
+    massive::AvatarResult result;
+    std::vector<std::string> collision_names;
+    std::vector<std::string> within_names;
+    std::string nearest_name;
+    std::uint64_t model_version = 0;  // the edits this pose saw
+    double server_seconds = 0;
+};
+
+struct ReviewPeerUpdate {
+    std::string member;
+    std::uint64_t sequence = 0;
+    massive::Affine transform;
+    ReviewPoseSummary summary;
+    std::uint64_t model_version = 0;
+};
+
+enum class ReviewEditKind { move, add, remove };
+
+struct ReviewEditApplied {
+    std::string member;  // who edited
+    std::uint64_t sequence = 0;
+    ReviewEditKind what = ReviewEditKind::move;
+    std::uint32_t object = 0;  // moved / deleted object, or the added object's new index
+    std::string object_name;
+    std::uint64_t model_version = 0;
+};
+
+struct ReviewEvent {
+    enum class Kind { joined, result, peer, edit_applied, member_joined, member_left };
+    Kind kind = Kind::joined;
+    ReviewJoined joined;      // kind == joined
+    ReviewPoseResult result;  // kind == result
+    ReviewPeerUpdate peer;    // kind == peer
+    ReviewEditApplied edit;   // kind == edit_applied
+    std::string member;       // kind == member_joined / member_left
+};
+
 class FrameStream;
+class ReviewSession;
 
 class Client {
   public:
@@ -109,6 +233,20 @@ class Client {
     // created from the first frame's additions (deleted when the stream ends).
     StatusOr<std::unique_ptr<FrameStream>> open_stream(const std::string& scene_id);
 
+    // The daemon's massive models (it rescans its --models DIR first) and its cache counters.
+    StatusOr<RemoteModelList> list_models();
+    // Static verification of a model (VerifyModel). Each event (progress, then each object pair
+    // as it is final) goes to `on_event` as it arrives; returning false cancels the call (the
+    // answer is then `cancelled`). `timeout` 0: no deadline. Returns the summary.
+    StatusOr<RemoteVerifySummary> verify_model(
+        const std::string& model, double tolerance,
+        const std::function<bool(const VerifyEvent&)>& on_event = {},
+        std::chrono::milliseconds timeout = std::chrono::milliseconds(0));
+    // Joins (or creates) a review room: sends the join and waits up to `timeout` for the
+    // daemon's `joined` (the members and their last poses), or its error.
+    StatusOr<std::unique_ptr<ReviewSession>> join_review(
+        const ReviewJoin& join, std::chrono::milliseconds timeout = std::chrono::seconds(30));
+
     struct Impl;
 
   private:
@@ -130,6 +268,42 @@ class FrameStream {
 
     struct Impl;
     explicit FrameStream(std::unique_ptr<Impl> impl);
+
+  private:
+    std::unique_ptr<Impl> m_impl;
+};
+
+// One member in a review room (the Review stream). Requests go out from the caller's thread;
+// events are read by a thread of the session into a small bounded queue (past 64 unread events it
+// stops reading, and the daemon's own bounds take over: see docs/api.md), and next() hands them
+// out in order. Sends are not thread-safe with each other; next() may run on another thread.
+class ReviewSession {
+  public:
+    ~ReviewSession();  // cancels the stream if it was not finished
+
+    const ReviewJoined& joined() const;
+
+    Status send_pose(std::uint64_t sequence, const massive::Affine& pose);
+    Status move_object(std::uint64_t sequence, std::uint32_t object,
+                       const massive::Affine& transform);
+    Status add_object(std::uint64_t sequence, const NamedMesh& object);
+    Status delete_object(std::uint64_t sequence, std::uint32_t object);
+
+    // The next event, waiting up to `timeout`: deadline_exceeded when none came in time; once the
+    // stream has ended and every event was taken, its final status (failed_precondition "the
+    // review stream has ended" after a clean end).
+    StatusOr<ReviewEvent> next(std::chrono::milliseconds timeout = std::chrono::seconds(30));
+    // Events until the result of pose `sequence`; the others go to `other` (if set), in order.
+    StatusOr<ReviewPoseResult> wait_result(
+        std::uint64_t sequence, const std::function<void(const ReviewEvent&)>& other = {},
+        std::chrono::milliseconds timeout = std::chrono::seconds(30));
+    // Half-closes (the member leaves), drops unread events and returns the final status.
+    Status finish();
+    // Cancels the stream (the daemon removes the member).
+    void cancel();
+
+    struct Impl;
+    explicit ReviewSession(std::unique_ptr<Impl> impl);
 
   private:
     std::unique_ptr<Impl> m_impl;

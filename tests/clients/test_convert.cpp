@@ -391,6 +391,7 @@ TEST(ClientConvert, StatusCodesMapByName) {
         {grpc::StatusCode::DEADLINE_EXCEEDED, StatusCode::deadline_exceeded},
         {grpc::StatusCode::UNAVAILABLE, StatusCode::unavailable},
         {grpc::StatusCode::INTERNAL, StatusCode::internal},
+        {grpc::StatusCode::DATA_LOSS, StatusCode::data_loss},  // a corrupt massive-model chunk
     };
     for (const auto& c : named) {
         const auto st = detail::from_grpc({c.grpc, "object 'a.off': triangle 3 index 9"});
@@ -412,7 +413,6 @@ TEST(ClientConvert, StatusCodesMapByName) {
         {grpc::StatusCode::ABORTED, "ABORTED"},
         {grpc::StatusCode::OUT_OF_RANGE, "OUT_OF_RANGE"},
         {grpc::StatusCode::UNIMPLEMENTED, "UNIMPLEMENTED"},
-        {grpc::StatusCode::DATA_LOSS, "DATA_LOSS"},
         {grpc::StatusCode::UNAUTHENTICATED, "UNAUTHENTICATED"},
         {static_cast<grpc::StatusCode>(20), "UNKNOWN"},  // a code from a newer gRPC
     };
@@ -468,6 +468,83 @@ TEST(ClientConvert, InfoMessagesDecodeEveryField) {
     EXPECT_EQ(s.objects[0].name, "box");
     EXPECT_EQ(s.objects[0].vertex_count, 8u);
     EXPECT_EQ(s.objects[0].triangle_count, 12u);
+}
+
+TEST(ClientConvert, MassiveModelMessagesDecode) {
+    // Transforms: exactly 12 numbers each way.
+    massive::Affine a;
+    for (std::size_t k = 0; k < 12; ++k) {
+        a.m[k] = 0.1 * static_cast<double>(k) - 0.3;
+    }
+    pb::Transform t;
+    detail::encode_transform(a, &t);
+    auto back = detail::decode_transform(t, "pose");
+    ASSERT_TRUE(back.ok());
+    EXPECT_EQ(back->m, a.m);
+    t.mutable_m()->RemoveLast();
+    EXPECT_EQ(detail::decode_transform(t, "pose").status().code(), StatusCode::internal);
+
+    pb::ListModelsResponse list;
+    list.set_models_dir("/srv/models");
+    auto* m = list.add_models();
+    m->set_name("plant");
+    m->set_objects(3);
+    m->set_pieces(5);
+    m->set_generation("gen-000002");
+    m->mutable_box()->mutable_hi()->set_z(2.5);
+    list.add_unavailable()->set_name("old");
+    list.mutable_unavailable(0)->set_status("DATA_LOSS: bad");
+    list.set_cache_budget_bytes(1024);
+    list.mutable_cache()->set_evictions(7);
+    const auto models = detail::decode_model_list(list);
+    ASSERT_EQ(models.models.size(), 1u);
+    EXPECT_EQ(models.models[0].name, "plant");
+    EXPECT_EQ(models.models[0].pieces, 5u);
+    EXPECT_EQ(models.models[0].box.hi.z, 2.5);
+    EXPECT_EQ(models.unavailable.at(0).second, "DATA_LOSS: bad");
+    EXPECT_EQ(models.cache.evictions, 7u);
+
+    pb::ReviewEvent event;
+    auto* r = event.mutable_result();
+    r->set_sequence(9);
+    auto* hit = r->add_collisions();
+    hit->set_object(4);
+    hit->set_object_name("tank");
+    hit->set_distance(0.0);
+    hit->mutable_object_point()->set_x(1.5);
+    r->mutable_nearest()->set_object(4);
+    r->mutable_nearest()->set_object_name("tank");
+    r->set_model_version(3);
+    auto decoded = detail::decode_review_event(event);
+    ASSERT_TRUE(decoded.ok());
+    EXPECT_EQ(decoded->kind, ReviewEvent::Kind::result);
+    EXPECT_EQ(decoded->result.sequence, 9u);
+    ASSERT_EQ(decoded->result.result.collisions.size(), 1u);
+    EXPECT_EQ(decoded->result.result.collisions[0].object, 4u);
+    EXPECT_EQ(decoded->result.result.collisions[0].object_point.x, 1.5);
+    EXPECT_EQ(decoded->result.collision_names, std::vector<std::string>{"tank"});
+    ASSERT_TRUE(decoded->result.result.nearest.has_value());
+    EXPECT_EQ(decoded->result.nearest_name, "tank");
+    EXPECT_EQ(decoded->result.model_version, 3u);
+
+    event.Clear();
+    event.mutable_peer()->set_member("bob");
+    EXPECT_EQ(detail::decode_review_event(event).status().code(), StatusCode::internal)
+        << "a peer update without its 12-number transform is malformed";
+    detail::encode_transform(a, event.mutable_peer()->mutable_transform());
+    auto peer = detail::decode_review_event(event);
+    ASSERT_TRUE(peer.ok());
+    EXPECT_EQ(peer->peer.member, "bob");
+    EXPECT_EQ(peer->peer.transform.m, a.m);
+
+    event.Clear();
+    event.mutable_edit_applied()->set_what(pb::EDIT_ADD);
+    event.mutable_edit_applied()->set_object(40);
+    auto edit = detail::decode_review_event(event);
+    ASSERT_TRUE(edit.ok());
+    EXPECT_EQ(edit->edit.what, ReviewEditKind::add);
+    EXPECT_EQ(edit->edit.object, 40u);
+    EXPECT_EQ(detail::decode_review_event(pb::ReviewEvent()).status().code(), StatusCode::internal);
 }
 
 }  // namespace

@@ -1,0 +1,783 @@
+// proxima models, verify and review: massive models (seed 001, IMMPACT) on a proximad daemon
+// (--server, the daemon's --models DIR) or in a local store written by `proxima import` (--store).
+// The local and server modes build the same engine results (ObjectPairResult, AvatarResult) and
+// print them through the same JSON code, so their outputs differ only in statistics and timings.
+//
+//   proxima models --server ADDR [--json]
+//   proxima verify (--store DIR | --server ADDR --model NAME) --tolerance D [--cache-bytes M]
+//                  [--brute-force] [--json FILE] [--quiet]
+//   proxima review (--store DIR | --server ADDR --model NAME) --avatar MESHFILE --path PATHFILE
+//                  [--room R] [--member NAME] [--tolerance D] [--no-nearest] [--cache-bytes M]
+//                  [--json FILE] [--quiet]
+//
+// A path file has one avatar pose per line: 12 numbers, the row-major 3x4 affine map
+// (a00 a01 a02 tx a10 a11 a12 ty a20 a21 a22 tz) applied to the avatar's own coordinates, or 3
+// numbers "x y z", a translation. Numbers are separated by spaces, tabs or commas; empty lines
+// and lines starting with '#' are skipped.
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.hpp"
+#include "client/proxima_client.hpp"
+#include "common/progress.hpp"
+#include "proxima/io/mesh_io.hpp"
+#include "proxima/massive/avatar.hpp"
+#include "proxima/massive/cache.hpp"
+#include "proxima/massive/store.hpp"
+#include "proxima/massive/verify.hpp"
+
+namespace proxima::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int fail(const Status& status) {
+    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
+    return 1;
+}
+
+double seconds_since(Clock::time_point start) {
+    return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// "160M" -> 160 MiB; "4096", "1.5G", "64KiB" too (binary units, as `proxima import`).
+StatusOr<std::uint64_t> parse_bytes(const std::string& option, const std::string& text) {
+    auto bad = [&] {
+        return invalid_argument(option + " '" + text +
+                                "': expected a number of bytes with an optional K, M or G suffix");
+    };
+    std::size_t used = 0;
+    double value = 0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        return bad();
+    }
+    std::string suffix = text.substr(used);
+    for (auto& c : suffix) {
+        c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    }
+    if (suffix.size() > 1 && suffix.back() == 'B') {
+        suffix.pop_back();
+        if (!suffix.empty() && suffix.back() == 'I') {
+            suffix.pop_back();
+        }
+    } else if (suffix == "B") {
+        suffix.clear();
+    }
+    double scale = 1;
+    if (suffix == "K") {
+        scale = 1024.0;
+    } else if (suffix == "M") {
+        scale = 1024.0 * 1024.0;
+    } else if (suffix == "G") {
+        scale = 1024.0 * 1024.0 * 1024.0;
+    } else if (!suffix.empty()) {
+        return bad();
+    }
+    const double bytes = std::round(value * scale);
+    if (!std::isfinite(bytes) || bytes < 1 || bytes > 1.8e19) {
+        return bad();
+    }
+    return static_cast<std::uint64_t>(bytes);
+}
+
+StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address) {
+    // float64 vertices (the default): the avatar the daemon poses is bit-identical to ours.
+    return client::Client::connect(address);
+}
+
+// Writes `doc` to `file`, or to standard output when `file` is empty.
+Status write_json(const nlohmann::json& doc, const std::string& file) {
+    if (file.empty()) {
+        std::cout << doc.dump() << '\n';
+        return {};
+    }
+    std::ofstream out(file, std::ios::trunc);
+    out << doc.dump(2) << '\n';
+    out.close();
+    if (!out) {
+        return {StatusCode::unavailable, "cannot write " + file};
+    }
+    return {};
+}
+
+nlohmann::json vec_json(const Vec3& v) {
+    return nlohmann::json::array({v.x, v.y, v.z});
+}
+
+nlohmann::json cache_json(const massive::CacheStats& c) {
+    return {{"budget_bytes", c.budget_bytes},
+            {"resident_bytes", c.resident_bytes},
+            {"peak_bytes", c.peak_bytes},
+            {"loads", c.loads},
+            {"prefetch_loads", c.prefetch_loads},
+            {"triangles_loaded", c.triangles_loaded},
+            {"bytes_loaded", c.bytes_loaded},
+            {"hits", c.hits},
+            {"misses", c.misses},
+            {"waits", c.waits},
+            {"evictions", c.evictions},
+            {"blocked_seconds", c.blocked_seconds}};
+}
+
+// --- models ------------------------------------------------------------------------------------
+
+struct ModelsArgs {
+    std::string server;
+    bool json = false;
+};
+
+int run_models(const ModelsArgs& args) {
+    auto c = connect(args.server);
+    if (!c.ok()) {
+        return fail(c.status());
+    }
+    auto list = c.value()->list_models();
+    if (!list.ok()) {
+        return fail(list.status());
+    }
+    const auto& l = list.value();
+    if (args.json) {
+        nlohmann::json models = nlohmann::json::array();
+        for (const auto& m : l.models) {
+            models.push_back({{"name", m.name},
+                              {"generation", m.generation},
+                              {"objects", m.objects},
+                              {"pieces", m.pieces},
+                              {"split_objects", m.split_objects},
+                              {"triangles", m.triangles},
+                              {"vertices", m.vertices},
+                              {"chunks", m.chunks},
+                              {"bytes", m.bytes},
+                              {"box", {{"lo", vec_json(m.box.lo)}, {"hi", vec_json(m.box.hi)}}}});
+        }
+        nlohmann::json unavailable = nlohmann::json::array();
+        for (const auto& [name, status] : l.unavailable) {
+            unavailable.push_back({{"name", name}, {"status", status}});
+        }
+        nlohmann::json doc = {{"server", args.server},
+                              {"models_dir", l.models_dir},
+                              {"models", models},
+                              {"unavailable", unavailable},
+                              {"cache", cache_json(l.cache)}};
+        std::cout << doc.dump() << '\n';
+        return 0;
+    }
+    if (l.models_dir.empty()) {
+        std::printf("proximad at %s serves no models (start it with --models DIR)\n",
+                    args.server.c_str());
+    } else {
+        std::printf(
+            "models in %s (cache %s):\n", l.models_dir.c_str(),
+            client::format_amount(static_cast<double>(l.cache_budget_bytes), "bytes").c_str());
+    }
+    for (const auto& m : l.models) {
+        std::printf("  %-24s %s  %llu objects, %llu pieces, %llu triangles\n", m.name.c_str(),
+                    m.generation.c_str(), static_cast<unsigned long long>(m.objects),
+                    static_cast<unsigned long long>(m.pieces),
+                    static_cast<unsigned long long>(m.triangles));
+    }
+    for (const auto& [name, status] : l.unavailable) {
+        std::printf("  %-24s unavailable: %s\n", name.c_str(), status.c_str());
+    }
+    const auto& cs = l.cache;
+    std::printf(
+        "cache: %s resident (peak %s), %llu loads, %llu hits, %llu misses, %llu evictions\n",
+        client::format_amount(static_cast<double>(cs.resident_bytes), "bytes").c_str(),
+        client::format_amount(static_cast<double>(cs.peak_bytes), "bytes").c_str(),
+        static_cast<unsigned long long>(cs.loads), static_cast<unsigned long long>(cs.hits),
+        static_cast<unsigned long long>(cs.misses), static_cast<unsigned long long>(cs.evictions));
+    return 0;
+}
+
+// --- verify ------------------------------------------------------------------------------------
+
+struct VerifyArgs {
+    std::string store;
+    std::string server;
+    std::string model;
+    double tolerance = 0.0;
+    std::string cache_bytes;
+    bool brute_force = false;
+    std::string json_file;
+    bool quiet = false;
+};
+
+nlohmann::json pair_json(const massive::ObjectPairResult& p, const std::string& name_a,
+                         const std::string& name_b) {
+    return {{"object_a", p.object_a},
+            {"object_b", p.object_b},
+            {"name_a", name_a},
+            {"name_b", name_b},
+            {"distance", p.distance},
+            {"triangle_a", p.triangle_a},
+            {"triangle_b", p.triangle_b},
+            {"point_a", vec_json(p.point_a)},
+            {"point_b", vec_json(p.point_b)}};
+}
+
+nlohmann::json verify_stats_json(const massive::VerifyStats& s) {
+    return {{"objects", s.objects},
+            {"pieces", s.pieces},
+            {"model_triangles", s.model_triangles},
+            {"subgraphs", s.subgraphs},
+            {"edges", s.edges},
+            {"object_pairs", s.object_pairs},
+            {"pairs_found", s.pairs_found},
+            {"exact_tests", s.exact_tests},
+            {"plan_seconds", s.plan_seconds},
+            {"seconds", s.seconds},
+            {"schedule_from_store", s.schedule_from_store},
+            {"cache", cache_json(s.cache)}};
+}
+
+// Pairs sorted by (object_a, object_b): the reference's order, whatever order they arrived in.
+struct NamedPairs {
+    std::vector<massive::ObjectPairResult> pairs;
+    std::vector<std::pair<std::string, std::string>> names;
+
+    nlohmann::json json() const {
+        std::vector<std::size_t> order(pairs.size());
+        for (std::size_t k = 0; k < order.size(); ++k) {
+            order[k] = k;
+        }
+        std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+            return std::tie(pairs[x].object_a, pairs[x].object_b) <
+                   std::tie(pairs[y].object_a, pairs[y].object_b);
+        });
+        nlohmann::json out = nlohmann::json::array();
+        for (auto k : order) {
+            out.push_back(pair_json(pairs[k], names[k].first, names[k].second));
+        }
+        return out;
+    }
+};
+
+int run_verify_local(const VerifyArgs& args, std::uint64_t cache_bytes) {
+    auto opened = massive::Store::open(args.store);
+    if (!opened.ok()) {
+        return fail(opened.status());
+    }
+    const std::shared_ptr<const massive::Store> store = opened.value();
+    const auto& objects = store->objects();
+    NamedPairs found;
+    auto add = [&](const massive::ObjectPairResult& p) {
+        found.pairs.push_back(p);
+        found.names.emplace_back(objects[p.object_a].name, objects[p.object_b].name);
+    };
+    nlohmann::json doc = {{"store", args.store},
+                          {"generation", store->summary().generation},
+                          {"tolerance", args.tolerance},
+                          {"method", args.brute_force ? "brute-force" : "static"}};
+    const auto start = Clock::now();
+    if (args.brute_force) {
+        if (!args.quiet) {
+            std::fprintf(stderr, "brute force: every object pair of %llu objects in memory\n",
+                         static_cast<unsigned long long>(objects.size()));
+        }
+        auto pairs = massive::verify_brute_force(*store, args.tolerance);
+        if (!pairs.ok()) {
+            return fail(pairs.status());
+        }
+        for (const auto& p : pairs.value()) {
+            add(p);
+        }
+        doc["stats"] = {{"pairs_found", found.pairs.size()},
+                        {"objects", objects.size()},
+                        {"seconds", seconds_since(start)}};
+    } else {
+        massive::GeometryCache cache(cache_bytes);
+        client::ProgressPrinter printer(args.quiet);
+        massive::VerifyOptions options;
+        options.tolerance = args.tolerance;
+        auto stats =
+            massive::verify_static(store, cache, options, add, nullptr, printer.callback());
+        printer.finish();
+        if (!stats.ok()) {
+            return fail(stats.status());
+        }
+        doc["stats"] = verify_stats_json(stats.value());
+        doc["stats"]["wall_seconds"] = seconds_since(start);
+    }
+    doc["pairs"] = found.json();
+    if (Status s = write_json(doc, args.json_file); !s.ok()) {
+        return fail(s);
+    }
+    return 0;
+}
+
+int run_verify_remote(const VerifyArgs& args) {
+    auto c = connect(args.server);
+    if (!c.ok()) {
+        return fail(c.status());
+    }
+    client::ProgressPrinter printer(args.quiet);
+    NamedPairs found;
+    const auto start = Clock::now();
+    auto summary =
+        c.value()->verify_model(args.model, args.tolerance, [&](const client::VerifyEvent& e) {
+            if (e.kind == client::VerifyEvent::Kind::progress) {
+                printer.update(e.progress);
+            } else {
+                found.pairs.push_back(e.pair.pair);
+                found.names.emplace_back(e.pair.name_a, e.pair.name_b);
+            }
+            return true;
+        });
+    printer.finish();
+    if (!summary.ok()) {
+        return fail(summary.status());
+    }
+    nlohmann::json doc = {{"server", args.server},
+                          {"model", args.model},
+                          {"tolerance", args.tolerance},
+                          {"method", "static"}};
+    doc["stats"] = verify_stats_json(summary->stats);
+    doc["stats"]["server_seconds"] = summary->server_seconds;
+    doc["stats"]["wall_seconds"] = seconds_since(start);
+    doc["pairs"] = found.json();
+    if (Status s = write_json(doc, args.json_file); !s.ok()) {
+        return fail(s);
+    }
+    return 0;
+}
+
+int run_verify(const VerifyArgs& args) {
+    if (!std::isfinite(args.tolerance) || args.tolerance < 0) {
+        return fail(invalid_argument("--tolerance must be a finite distance >= 0"));
+    }
+    if (!args.server.empty()) {
+        if (args.model.empty()) {
+            return fail(
+                invalid_argument("--server needs --model NAME (proxima models lists them)"));
+        }
+        if (args.brute_force || !args.cache_bytes.empty()) {
+            return fail(invalid_argument(
+                "--brute-force and --cache-bytes are for --store (the daemon's cache is its "
+                "--cache-bytes)"));
+        }
+        return run_verify_remote(args);
+    }
+    std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
+    if (!args.cache_bytes.empty()) {
+        auto v = parse_bytes("--cache-bytes", args.cache_bytes);
+        if (!v.ok()) {
+            return fail(v.status());
+        }
+        cache_bytes = v.value();
+    }
+    return run_verify_local(args, cache_bytes);
+}
+
+// --- review ------------------------------------------------------------------------------------
+
+struct ReviewArgs {
+    std::string store;
+    std::string server;
+    std::string model;
+    std::string room;
+    std::string member;
+    std::string avatar;
+    std::string path;
+    double tolerance = 0.0;
+    bool no_nearest = false;
+    std::string cache_bytes;
+    std::string json_file;
+    bool quiet = false;
+};
+
+// The path file's poses (format at the top of this file).
+StatusOr<std::vector<massive::Affine>> read_path(const std::string& file) {
+    std::ifstream in(file);
+    if (!in) {
+        return not_found("path file " + file + " cannot be opened");
+    }
+    std::vector<massive::Affine> poses;
+    std::string line;
+    for (std::size_t number = 1; std::getline(in, line); ++number) {
+        const auto first = line.find_first_not_of(" \t\r");
+        if (first == std::string::npos || line[first] == '#') {
+            continue;
+        }
+        std::replace(line.begin(), line.end(), ',', ' ');
+        std::istringstream fields(line);
+        std::vector<double> values;
+        std::string field;
+        while (fields >> field) {
+            std::size_t used = 0;
+            double v = 0;
+            try {
+                v = std::stod(field, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            if (used != field.size() || !std::isfinite(v)) {
+                return invalid_argument(file + ":" + std::to_string(number) + ": '" + field +
+                                        "' is not a finite number");
+            }
+            values.push_back(v);
+        }
+        massive::Affine pose;
+        if (values.size() == 12) {
+            std::copy(values.begin(), values.end(), pose.m.begin());
+        } else if (values.size() == 3) {
+            pose.m[3] = values[0];
+            pose.m[7] = values[1];
+            pose.m[11] = values[2];
+        } else {
+            return invalid_argument(file + ":" + std::to_string(number) + ": expected 12 numbers " +
+                                    "(a row-major 3x4 transform) or 3 (a translation x y z), got " +
+                                    std::to_string(values.size()));
+        }
+        poses.push_back(pose);
+    }
+    if (poses.empty()) {
+        return invalid_argument("path file " + file + " has no poses");
+    }
+    return poses;
+}
+
+nlohmann::json hit_json(const massive::AvatarHit& h, const std::string& name) {
+    return {{"object", h.object},
+            {"name", name},
+            {"distance", h.distance},
+            {"object_triangle", h.object_triangle},
+            {"avatar_triangle", h.avatar_triangle},
+            {"object_point", vec_json(h.object_point)},
+            {"avatar_point", vec_json(h.avatar_point)}};
+}
+
+// One pose's answer: the same shape in both modes.
+nlohmann::json pose_json(std::uint64_t sequence, const massive::AvatarResult& r,
+                         const std::vector<std::string>& collision_names,
+                         const std::vector<std::string>& within_names,
+                         const std::string& nearest_name, double round_trip_ms) {
+    nlohmann::json collisions = nlohmann::json::array();
+    for (std::size_t k = 0; k < r.collisions.size(); ++k) {
+        collisions.push_back(hit_json(r.collisions[k], collision_names[k]));
+    }
+    nlohmann::json within = nlohmann::json::array();
+    for (std::size_t k = 0; k < r.within.size(); ++k) {
+        within.push_back(hit_json(r.within[k], within_names[k]));
+    }
+    return {{"sequence", sequence},
+            {"collisions", collisions},
+            {"within", within},
+            {"nearest", r.nearest ? hit_json(*r.nearest, nearest_name) : nlohmann::json()},
+            {"stats",
+             {{"candidate_pieces", r.candidate_pieces},
+              {"pieces_tested", r.pieces_tested},
+              {"exact_tests", r.exact_tests},
+              {"prefetch_hints", r.prefetch_hints},
+              {"seconds", r.seconds},
+              {"round_trip_ms", round_trip_ms}}}};
+}
+
+nlohmann::json latency_json(std::vector<double> ms) {
+    if (ms.empty()) {
+        return nullptr;
+    }
+    std::sort(ms.begin(), ms.end());
+    // Nearest rank: the smallest value with at least q of the samples at or below it.
+    auto rank = [&](double q) {
+        const auto k = static_cast<std::size_t>(std::ceil(q * static_cast<double>(ms.size())));
+        return ms[std::min(ms.size() - 1, k == 0 ? 0 : k - 1)];
+    };
+    double sum = 0;
+    for (double v : ms) {
+        sum += v;
+    }
+    return {{"p50", rank(0.50)},
+            {"p99", rank(0.99)},
+            {"max", ms.back()},
+            {"mean", sum / static_cast<double>(ms.size())},
+            {"poses", ms.size()}};
+}
+
+void report_progress(client::ProgressPrinter& printer, std::size_t done, std::size_t total) {
+    printer.update({"reviewing", done, total, "poses"});
+}
+
+int run_review_local(const ReviewArgs& args, const TriangleMesh& avatar,
+                     const std::vector<massive::Affine>& poses, std::uint64_t cache_bytes) {
+    auto opened = massive::Store::open(args.store);
+    if (!opened.ok()) {
+        return fail(opened.status());
+    }
+    const std::shared_ptr<const massive::Store> store = opened.value();
+    auto view = std::make_shared<massive::ModelView>(
+        store, std::make_shared<massive::GeometryCache>(cache_bytes));
+    auto tracker = massive::AvatarTracker::create(view, avatar);
+    if (!tracker.ok()) {
+        return fail(tracker.status());
+    }
+    massive::AvatarQueryOptions options;
+    options.tolerance = args.tolerance;
+    options.nearest = !args.no_nearest;
+    client::ProgressPrinter printer(args.quiet);
+    nlohmann::json out = nlohmann::json::array();
+    std::vector<double> latencies;
+    auto name = [&](std::uint32_t object) {
+        auto n = view->object_name(object);
+        return n.ok() ? n.value() : std::string();
+    };
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+        const auto start = Clock::now();
+        auto r = tracker.value()->query(poses[k], options);
+        const double ms = seconds_since(start) * 1e3;
+        if (!r.ok()) {
+            printer.finish();
+            return fail(r.status());
+        }
+        std::vector<std::string> collision_names;
+        std::vector<std::string> within_names;
+        for (const auto& h : r->collisions) {
+            collision_names.push_back(name(h.object));
+        }
+        for (const auto& h : r->within) {
+            within_names.push_back(name(h.object));
+        }
+        latencies.push_back(ms);
+        out.push_back(pose_json(k + 1, r.value(), collision_names, within_names,
+                                r->nearest ? name(r->nearest->object) : std::string(), ms));
+        report_progress(printer, k + 1, poses.size());
+    }
+    printer.finish();
+    nlohmann::json doc = {{"store", args.store},
+                          {"generation", store->summary().generation},
+                          {"tolerance", args.tolerance},
+                          {"nearest", !args.no_nearest},
+                          {"poses", out},
+                          {"latency_ms", latency_json(latencies)},
+                          {"cache", cache_json(view->cache()->stats())}};
+    if (Status s = write_json(doc, args.json_file); !s.ok()) {
+        return fail(s);
+    }
+    return 0;
+}
+
+int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
+                      const std::vector<massive::Affine>& poses) {
+    auto c = connect(args.server);
+    if (!c.ok()) {
+        return fail(c.status());
+    }
+    client::ReviewJoin join;
+    join.room = args.room;
+    join.model = args.model;
+    join.member = args.member;
+    join.avatar = {"avatar", avatar};
+    join.tolerance = args.tolerance;
+    join.nearest = !args.no_nearest;
+    auto session = c.value()->join_review(join);
+    if (!session.ok()) {
+        return fail(session.status());
+    }
+    auto& review = *session.value();
+    const auto& joined = review.joined();
+    if (!args.quiet) {
+        std::fprintf(stderr, "joined room %s (model %s %s) as %s with %zu other member(s)\n",
+                     joined.room.c_str(), joined.model.c_str(), joined.generation.c_str(),
+                     args.member.c_str(), joined.members.size() - 1);
+    }
+    client::ProgressPrinter printer(args.quiet);
+    nlohmann::json out = nlohmann::json::array();
+    std::vector<double> latencies;
+    std::uint64_t peer_updates = 0;
+    std::uint64_t edits_seen = 0;
+    auto other = [&](const client::ReviewEvent& e) {
+        if (e.kind == client::ReviewEvent::Kind::peer) {
+            ++peer_updates;
+        } else if (e.kind == client::ReviewEvent::Kind::edit_applied) {
+            ++edits_seen;
+        }
+    };
+    // Lockstep (send a pose, wait for its answer), so each round trip is measured alone.
+    for (std::size_t k = 0; k < poses.size(); ++k) {
+        const auto start = Clock::now();
+        if (Status s = review.send_pose(k + 1, poses[k]); !s.ok()) {
+            printer.finish();
+            return fail(s);
+        }
+        auto r = review.wait_result(k + 1, other);
+        const double ms = seconds_since(start) * 1e3;
+        if (!r.ok()) {
+            printer.finish();
+            return fail(r.status());
+        }
+        latencies.push_back(ms);
+        auto pose =
+            pose_json(k + 1, r->result, r->collision_names, r->within_names, r->nearest_name, ms);
+        pose["stats"]["server_seconds"] = r->server_seconds;
+        pose["model_version"] = r->model_version;
+        out.push_back(std::move(pose));
+        report_progress(printer, k + 1, poses.size());
+    }
+    printer.finish();
+    if (Status s = review.finish(); !s.ok()) {
+        return fail(s);
+    }
+    nlohmann::json doc = {{"server", args.server},
+                          {"model", args.model},
+                          {"generation", joined.generation},
+                          {"room", args.room},
+                          {"member", args.member},
+                          {"tolerance", args.tolerance},
+                          {"nearest", !args.no_nearest},
+                          {"poses", out},
+                          {"latency_ms", latency_json(latencies)},
+                          {"peer_updates", peer_updates},
+                          {"edits_seen", edits_seen}};
+    if (Status s = write_json(doc, args.json_file); !s.ok()) {
+        return fail(s);
+    }
+    return 0;
+}
+
+int run_review(const ReviewArgs& args) {
+    if (!std::isfinite(args.tolerance) || args.tolerance < 0) {
+        return fail(invalid_argument("--tolerance must be a finite distance >= 0"));
+    }
+    auto avatar = read_mesh(args.avatar);
+    if (!avatar.ok()) {
+        return fail(avatar.status());
+    }
+    auto poses = read_path(args.path);
+    if (!poses.ok()) {
+        return fail(poses.status());
+    }
+    if (!args.server.empty()) {
+        if (args.model.empty()) {
+            return fail(
+                invalid_argument("--server needs --model NAME (proxima models lists them)"));
+        }
+        if (!args.cache_bytes.empty()) {
+            return fail(invalid_argument(
+                "--cache-bytes is for --store (the daemon's cache is its --cache-bytes)"));
+        }
+        return run_review_remote(args, avatar.value(), poses.value());
+    }
+    std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
+    if (!args.cache_bytes.empty()) {
+        auto v = parse_bytes("--cache-bytes", args.cache_bytes);
+        if (!v.ok()) {
+            return fail(v.status());
+        }
+        cache_bytes = v.value();
+    }
+    return run_review_local(args, avatar.value(), poses.value(), cache_bytes);
+}
+
+}  // namespace
+
+void add_massive_commands(CLI::App& app, int& exit_code) {
+    auto models_args = std::make_shared<ModelsArgs>();
+    auto* models = app.add_subcommand(
+        "models", "List the massive models a proximad daemon serves, and its cache counters");
+    models->add_option("--server", models_args->server, "The daemon's HOST:PORT")->required();
+    models->add_flag("--json", models_args->json, "Print one JSON object");
+    models->callback([models_args, &exit_code] { exit_code = run_models(*models_args); });
+
+    auto verify_args = std::make_shared<VerifyArgs>();
+    auto* verify = app.add_subcommand(
+        "verify",
+        "Every object pair of a massive model within a tolerance (0: every collision), through a "
+        "cache of bounded size; JSON on standard output or --json FILE, progress on standard "
+        "error");
+    auto* store_opt =
+        verify->add_option("--store", verify_args->store, "Run in this process on the store in DIR")
+            ->type_name("DIR");
+    auto* server_opt = verify->add_option("--server", verify_args->server,
+                                          "Run on the proximad daemon at HOST:PORT (with --model)");
+    store_opt->excludes(server_opt);
+    verify->add_option("--model", verify_args->model, "With --server: the model's name")
+        ->needs(server_opt);
+    verify
+        ->add_option("--tolerance", verify_args->tolerance,
+                     "Report object pairs within this distance (0: touching or intersecting)")
+        ->required();
+    verify
+        ->add_option("--cache-bytes", verify_args->cache_bytes,
+                     "With --store: the cache budget (K, M, G suffixes; default 160M)")
+        ->needs(store_opt);
+    verify
+        ->add_flag("--brute-force", verify_args->brute_force,
+                   "With --store: every object pair with everything in memory (the reference)")
+        ->needs(store_opt);
+    verify->add_option("--json", verify_args->json_file, "Write the JSON result to FILE")
+        ->type_name("FILE");
+    verify->add_flag("--quiet", verify_args->quiet, "No progress on standard error");
+    verify->callback([verify_args, &exit_code] {
+        if (verify_args->store.empty() && verify_args->server.empty()) {
+            exit_code = fail(invalid_argument("verify needs --store DIR or --server ADDR"));
+            return;
+        }
+        exit_code = run_verify(*verify_args);
+    });
+
+    auto review_args = std::make_shared<ReviewArgs>();
+    auto* review = app.add_subcommand(
+        "review",
+        "Walk an avatar along a path of poses through a massive model: per pose the objects it "
+        "touches, those within the tolerance and the nearest; latency percentiles");
+    auto* review_store =
+        review->add_option("--store", review_args->store, "Run in this process on the store in DIR")
+            ->type_name("DIR");
+    auto* review_server =
+        review->add_option("--server", review_args->server,
+                           "Join a review room on the proximad daemon at HOST:PORT (with --model)");
+    review_store->excludes(review_server);
+    review->add_option("--model", review_args->model, "With --server: the model's name")
+        ->needs(review_server);
+    review->add_option("--room", review_args->room, "With --server: the room (default: review)")
+        ->needs(review_server)
+        ->default_str("review");
+    review_args->room = "review";
+    review
+        ->add_option("--member", review_args->member,
+                     "With --server: this member's name in the room (default: proxima-cli)")
+        ->needs(review_server);
+    review_args->member = "proxima-cli";
+    review->add_option("--avatar", review_args->avatar, "The avatar's mesh file (any format)")
+        ->required()
+        ->check(CLI::ExistingFile);
+    review
+        ->add_option("--path", review_args->path,
+                     "Poses, one a line: 12 numbers (row-major 3x4 transform) or 3 (x y z)")
+        ->required()
+        ->check(CLI::ExistingFile);
+    review->add_option("--tolerance", review_args->tolerance,
+                       "Report objects within this distance of the avatar (default 0)");
+    review->add_flag("--no-nearest", review_args->no_nearest,
+                     "Do not look for the nearest object beyond the tolerance");
+    review
+        ->add_option("--cache-bytes", review_args->cache_bytes,
+                     "With --store: the cache budget (K, M, G suffixes; default 160M)")
+        ->needs(review_store);
+    review->add_option("--json", review_args->json_file, "Write the JSON result to FILE")
+        ->type_name("FILE");
+    review->add_flag("--quiet", review_args->quiet, "No progress on standard error");
+    review->callback([review_args, &exit_code] {
+        if (review_args->store.empty() && review_args->server.empty()) {
+            exit_code = fail(invalid_argument("review needs --store DIR or --server ADDR"));
+            return;
+        }
+        exit_code = run_review(*review_args);
+    });
+}
+
+}  // namespace proxima::cli

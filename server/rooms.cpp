@@ -1,0 +1,229 @@
+#include "rooms.hpp"
+
+#include <algorithm>
+#include <utility>
+
+#include <spdlog/spdlog.h>
+
+namespace proxima::server {
+
+// --- Outbox ----------------------------------------------------------------------------------
+
+bool Outbox::push(RoomEvent event, bool own) {
+    if (m_ordered >= m_max_ordered) {
+        return false;
+    }
+    m_items.emplace(m_next++, Item{std::move(event), own});
+    ++m_ordered;
+    return true;
+}
+
+void Outbox::push_peer(PeerEvent event) {
+    // The newest update takes the place of the pending one and goes to the end, so the reader
+    // sees events in the order they happened, minus the stale poses it never had time to read.
+    drop_peer(event.member);
+    const auto slot = m_next++;
+    m_peer_slot[event.member] = slot;
+    m_items.emplace(slot, Item{std::move(event), false});
+}
+
+void Outbox::drop_peer(const std::string& member) {
+    if (auto it = m_peer_slot.find(member); it != m_peer_slot.end()) {
+        m_items.erase(it->second);
+        m_peer_slot.erase(it);
+    }
+}
+
+std::optional<Outbox::Item> Outbox::pop() {
+    if (m_items.empty()) {
+        return std::nullopt;
+    }
+    auto node = m_items.extract(m_items.begin());
+    Item item = std::move(node.mapped());
+    if (const auto* peer = std::get_if<PeerEvent>(&item.event)) {
+        m_peer_slot.erase(peer->member);
+    } else {
+        --m_ordered;
+    }
+    return item;
+}
+
+// --- delivery ----------------------------------------------------------------------------------
+
+void deliver(RoomMember& member, RoomEvent event, bool own) {
+    std::lock_guard lock(member.mu);
+    if (member.closed || member.sink == nullptr) {
+        return;
+    }
+    if (auto* peer = std::get_if<PeerEvent>(&event)) {
+        member.outbox.push_peer(std::move(*peer));
+    } else {
+        if (auto* left = std::get_if<MemberLeftEvent>(&event)) {
+            member.outbox.drop_peer(left->member);  // no stale pose after "left"
+        }
+        if (!member.outbox.push(std::move(event), own)) {
+            member.closed = true;
+            member.sink->overflowed_locked();
+            return;
+        }
+    }
+    member.sink->events_ready_locked();
+}
+
+// --- Room --------------------------------------------------------------------------------------
+
+Room::Room(std::string name, std::shared_ptr<const ModelEntry> model,
+           std::shared_ptr<massive::GeometryCache> cache)
+    : m_name(std::move(name)),
+      m_model(std::move(model)),
+      m_view(std::make_shared<massive::ModelView>(m_model->store, std::move(cache))) {}
+
+std::size_t Room::member_count() const {
+    std::lock_guard lock(m_mu);
+    return m_members.size();
+}
+
+void Room::publish_pose(RoomMember& from, const MemberPose& pose) {
+    std::lock_guard lock(m_mu);
+    from.last_pose = pose;
+    for (const auto& m : m_members) {
+        if (m.get() != &from) {
+            deliver(*m, PeerEvent{from.name, pose}, false);
+        }
+    }
+}
+
+StatusOr<EditEvent> Room::apply_edit(RoomMember& editor, const RoomEdit& edit) {
+    // Exclusive: no pose is computing, so every result names exactly the version it saw; and
+    // edits reach every member in the order they were applied.
+    std::unique_lock edit_lock(m_edit_mu);
+    EditEvent event;
+    event.member = editor.name;
+    event.sequence = edit.sequence;
+    event.what = edit.what;
+    switch (edit.what) {
+        case EditKind::move: {
+            if (Status s = m_view->move_object(edit.object, edit.transform); !s.ok()) {
+                return s;
+            }
+            event.object = edit.object;
+            break;
+        }
+        case EditKind::add: {
+            auto id = m_view->add_object({edit.added.name, edit.added.mesh});
+            if (!id.ok()) {
+                return id.status();
+            }
+            event.object = id.value();
+            break;
+        }
+        case EditKind::remove: {
+            // The name first: a deleted object has none in the view any more.
+            auto name = m_view->object_name(edit.object);
+            if (!name.ok() || m_view->deleted(edit.object)) {
+                return not_found("delete: no object " + std::to_string(edit.object) + " in room " +
+                                 m_name + "'s model");
+            }
+            if (Status s = m_view->delete_object(edit.object); !s.ok()) {
+                return s;
+            }
+            event.object = edit.object;
+            event.object_name = std::move(name).value();
+            break;
+        }
+    }
+    if (event.object_name.empty()) {
+        if (auto name = m_view->object_name(event.object); name.ok()) {
+            event.object_name = std::move(name).value();
+        }
+    }
+    event.model_version = m_view->version();
+    std::lock_guard lock(m_mu);
+    for (const auto& m : m_members) {
+        deliver(*m, event, m.get() == &editor);
+    }
+    return event;
+}
+
+// --- RoomRegistry ------------------------------------------------------------------------------
+
+StatusOr<std::shared_ptr<Room>> RoomRegistry::join(
+    const std::string& room_name, const std::shared_ptr<const ModelEntry>& model,
+    const std::shared_ptr<massive::GeometryCache>& cache,
+    const std::shared_ptr<RoomMember>& member) {
+    std::lock_guard lock(m_mu);
+    auto it = m_rooms.find(room_name);
+    std::shared_ptr<Room> room;
+    if (it != m_rooms.end()) {
+        room = it->second;
+        if (room->model().name != model->name) {
+            return failed_precondition("room " + room_name + " reviews model '" +
+                                       room->model().name + "', not '" + model->name +
+                                       "' (pick another room name)");
+        }
+    } else {
+        room = std::make_shared<Room>(room_name, model, cache);
+    }
+    // Shared edit lock: an edit is either wholly before the join (in model_version) or wholly
+    // after it (and then reaches the new member as edit_applied).
+    std::shared_lock edit_lock(room->m_edit_mu);
+    std::lock_guard room_lock(room->m_mu);
+    for (const auto& m : room->m_members) {
+        if (m->name == member->name) {
+            return failed_precondition("room " + room_name + " already has a member named '" +
+                                       member->name + "'");
+        }
+    }
+    JoinedEvent joined;
+    joined.room = room_name;
+    joined.model = room->model().name;
+    joined.generation = room->model().store->summary().generation;
+    for (const auto& m : room->m_members) {
+        joined.members.emplace_back(m->name, m->last_pose);
+    }
+    joined.members.emplace_back(member->name, member->last_pose);
+    joined.model_version = room->view()->version();
+    joined.object_count = room->view()->object_count();
+    for (const auto& m : room->m_members) {
+        deliver(*m, MemberJoinedEvent{member->name}, false);
+    }
+    room->m_members.push_back(member);
+    deliver(*member, std::move(joined), true);
+    if (it == m_rooms.end()) {
+        m_rooms.emplace(room_name, room);
+        spdlog::info("room created room={} model={} generation={}", room_name, model->name,
+                     model->store->summary().generation);
+    }
+    return room;
+}
+
+std::shared_ptr<Room> RoomRegistry::leave(const std::shared_ptr<Room>& room,
+                                          const std::shared_ptr<RoomMember>& member) {
+    std::lock_guard lock(m_mu);
+    std::lock_guard room_lock(room->m_mu);
+    auto& members = room->m_members;
+    const auto it = std::find(members.begin(), members.end(), member);
+    if (it == members.end()) {
+        return nullptr;
+    }
+    members.erase(it);
+    for (const auto& m : members) {
+        deliver(*m, MemberLeftEvent{member->name}, false);
+    }
+    if (!members.empty()) {
+        return nullptr;
+    }
+    if (auto r = m_rooms.find(room->name()); r != m_rooms.end() && r->second == room) {
+        m_rooms.erase(r);
+    }
+    spdlog::info("room deleted room={} model={} (its last member left)", room->name(),
+                 room->model().name);
+    return room;
+}
+
+std::size_t RoomRegistry::size() const {
+    std::lock_guard lock(m_mu);
+    return m_rooms.size();
+}
+
+}  // namespace proxima::server

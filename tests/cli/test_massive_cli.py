@@ -1,0 +1,230 @@
+#!/usr/bin/env python3
+"""Tests of `proxima verify` and `proxima review` as a user runs them, on a small store imported
+from OFF files: `verify --store` equals `verify --store --brute-force` exactly (every pair, every
+double), `review --store` on a tiny path gives the expected contacts and latency percentiles, bad
+path files are exit 1 with a message; with PROXIMAD given, the same commands on the daemon
+(`--server`) print the same answers and `proxima models` lists the store.
+Usage: test_massive_cli.py PROXIMA [PROXIMAD]."""
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import unittest
+
+PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
+PROXIMAD = sys.argv[2] if len(sys.argv) > 2 else None
+
+
+def run(*args, timeout=120):
+    p = subprocess.run(list(args), capture_output=True, text=True, timeout=timeout)
+    # A negative return code is a signal: a crash, never acceptable.
+    assert p.returncode >= 0, f"{args[0]} crashed with signal {-p.returncode}: {p.stderr}"
+    return p
+
+
+def box(lo, hi):
+    v = [(hi[0] if k & 1 else lo[0], hi[1] if k & 2 else lo[1], hi[2] if k & 4 else lo[2])
+         for k in range(8)]
+    f = [(0, 2, 1), (1, 2, 3), (4, 5, 6), (5, 7, 6), (0, 1, 4), (1, 5, 4), (2, 6, 3), (3, 6, 7),
+         (0, 4, 2), (2, 4, 6), (1, 3, 5), (3, 7, 5)]
+    return v, f
+
+
+def grid(n, x0, y0, z, size):
+    """A flat n x n grid of squares (2 n^2 triangles): large enough to be split into pieces."""
+    v = [(x0 + size * i / n, y0 + size * j / n, z) for j in range(n + 1) for i in range(n + 1)]
+    f = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            f += [(a, a + 1, a + n + 2), (a, a + n + 2, a + n + 1)]
+    return v, f
+
+
+def write_off(path, mesh):
+    v, f = mesh
+    with open(path, "w") as out:
+        out.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        for p in v:
+            out.write(" ".join(repr(float(c)) for c in p) + "\n")
+        for t in f:
+            out.write("3 " + " ".join(str(i) for i in t) + "\n")
+
+
+def strip_stats(doc):
+    """The answer without statistics, timings and where it ran."""
+    doc = {k: v for k, v in doc.items()
+           if k not in ("stats", "latency_ms", "cache", "server", "store", "model", "room",
+                        "member", "peer_updates", "edits_seen", "method")}
+    if "poses" in doc:
+        doc["poses"] = [{k: v for k, v in p.items() if k not in ("stats", "model_version")}
+                        for p in doc["poses"]]
+    return doc
+
+
+class MassiveCli(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix="proxima-massive-cli-")
+        meshes = os.path.join(cls.tmp, "meshes")
+        os.makedirs(meshes)
+        # A row of boxes 1 apart, pairs touching (0-1), 0.05 apart (2-3) and overlapping (4-5),
+        # and a fine floor grid under them, touching every box.
+        shift = [0.0, -1.0, 0.0, -0.95, 0.0, -1.3]
+        for i in range(6):
+            x = 2.0 * i + shift[i]
+            write_off(os.path.join(meshes, f"box-{i}.off"), box((x, 0, 0), (x + 1, 1, 1)))
+        write_off(os.path.join(meshes, "floor.off"), grid(40, -1, -1, 0.0, 14))
+        cls.models = os.path.join(cls.tmp, "models")
+        cls.store = os.path.join(cls.models, "row")
+        p = run(PROXIMA, "import", "--store", cls.store, "--max-piece-bytes", "64K", "--quiet",
+                meshes)
+        assert p.returncode == 0, p.stderr
+        cls.summary = json.loads(p.stdout)
+        cls.avatar = os.path.join(cls.tmp, "avatar.off")
+        write_off(cls.avatar, box((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1)))
+        cls.path = os.path.join(cls.tmp, "path.txt")
+        with open(cls.path, "w") as out:
+            out.write("# along the row at mid height, then one full transform\n")
+            for k in range(12):
+                out.write(f"{0.5 + k}, 0.5, 0.5\n")
+            out.write("\n1 0 0 1.0  0 1 0 0.5  0 0 1 0.5\n")
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def json_of(self, *args):
+        p = run(PROXIMA, *args)
+        self.assertEqual(p.returncode, 0, f"{args}: {p.stderr}")
+        return json.loads(p.stdout)
+
+    def test_store_is_split(self):
+        self.assertEqual(self.summary["objects"], 7)
+        self.assertGreater(self.summary["pieces"], 7)
+
+    def test_verify_equals_brute_force(self):
+        for tolerance in ("0", "0.1"):
+            static = self.json_of("verify", "--store", self.store, "--tolerance", tolerance,
+                                  "--cache-bytes", "256K", "--quiet")
+            brute = self.json_of("verify", "--store", self.store, "--tolerance", tolerance,
+                                 "--brute-force", "--quiet")
+            self.assertEqual(static["method"], "static")
+            self.assertEqual(brute["method"], "brute-force")
+            # Exact: the same pairs, names, triangles and doubles.
+            self.assertEqual(static["pairs"], brute["pairs"], tolerance)
+            self.assertGreater(len(static["pairs"]), 0)
+            self.assertEqual(static["stats"]["pairs_found"], len(static["pairs"]))
+            names = {(p["name_a"], p["name_b"]) for p in static["pairs"]}
+            self.assertTrue(any("floor" in a + b for a, b in names))
+            if tolerance == "0.1":
+                self.assertTrue(any(p["distance"] > 0 for p in static["pairs"]))
+            else:
+                self.assertTrue(all(p["distance"] == 0 for p in static["pairs"]))
+
+    def test_verify_progress_and_json_file(self):
+        out = os.path.join(self.tmp, "verify.json")
+        p = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0.1", "--json", out)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertEqual(p.stdout, "")
+        self.assertIn("verifying", p.stderr)
+        with open(out) as f:
+            doc = json.load(f)
+        self.assertIn("pairs", doc)
+        q = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0.1", "--quiet")
+        self.assertEqual(q.stderr, "")
+
+    def test_review_local(self):
+        doc = self.json_of("review", "--store", self.store, "--avatar", self.avatar, "--path",
+                           self.path, "--tolerance", "0.2", "--quiet")
+        poses = doc["poses"]
+        self.assertEqual(len(poses), 13)
+        self.assertEqual([p["sequence"] for p in poses], list(range(1, 14)))
+        # x = 0.5 is inside box-0 (surfaces 0.4 away); x = 1.0 straddles the box-0/box-1 faces.
+        first, last = poses[0], poses[-1]
+        self.assertEqual(first["collisions"], [])
+        self.assertIsNotNone(first["nearest"])
+        self.assertEqual({h["name"] for h in last["collisions"]}, {"box-0.off", "box-1.off"})
+        for p in poses:
+            for h in p["collisions"]:
+                self.assertEqual(h["distance"], 0.0)
+            for h in p["within"]:
+                self.assertLessEqual(h["distance"], 0.2)
+        lat = doc["latency_ms"]
+        self.assertEqual(lat["poses"], 13)
+        self.assertLessEqual(lat["p50"], lat["p99"])
+        self.assertLessEqual(lat["p99"], lat["max"])
+
+    def test_bad_input(self):
+        bad = os.path.join(self.tmp, "bad-path.txt")
+        with open(bad, "w") as out:
+            out.write("1 2 3\n1 2\n")
+        p = run(PROXIMA, "review", "--store", self.store, "--avatar", self.avatar, "--path", bad)
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("bad-path.txt:2: expected 12 numbers", p.stderr)
+        p = run(PROXIMA, "verify", "--store", os.path.join(self.tmp, "nothing"), "--tolerance",
+                "0")
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("proxima: error: NOT_FOUND", p.stderr)
+        p = run(PROXIMA, "verify", "--tolerance", "0")
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("--store DIR or --server ADDR", p.stderr)
+        p = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0", "--cache-bytes",
+                "lots")
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("--cache-bytes 'lots'", p.stderr)
+
+    @unittest.skipUnless(PROXIMAD, "no proximad given")
+    def test_server_equals_local(self):
+        proc = subprocess.Popen([PROXIMAD, "--listen", "127.0.0.1:0", "--models", self.models,
+                                 "--cache-bytes", str(256 * 1024), "--gpu", "off",
+                                 "--log-level", "warn"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            first = []
+            reader = threading.Thread(target=lambda: first.append(proc.stdout.readline()))
+            reader.daemon = True
+            reader.start()
+            reader.join(30)
+            m = re.match(r"listening on (\S+:\d+)$", first[0].strip()) if first else None
+            self.assertTrue(m, f"proximad did not start: {first!r}")
+            address = m.group(1)
+            models = self.json_of("models", "--server", address, "--json")
+            self.assertEqual([m["name"] for m in models["models"]], ["row"])
+            self.assertEqual(models["models"][0]["pieces"], self.summary["pieces"])
+            text = run(PROXIMA, "models", "--server", address)
+            self.assertIn("row", text.stdout)
+            local = self.json_of("verify", "--store", self.store, "--tolerance", "0.1",
+                                 "--brute-force", "--quiet")
+            remote = self.json_of("verify", "--server", address, "--model", "row",
+                                  "--tolerance", "0.1", "--quiet")
+            self.assertEqual(remote["pairs"], local["pairs"])
+            local = self.json_of("review", "--store", self.store, "--avatar", self.avatar,
+                                 "--path", self.path, "--tolerance", "0.2", "--quiet")
+            remote = self.json_of("review", "--server", address, "--model", "row", "--avatar",
+                                  self.avatar, "--path", self.path, "--tolerance", "0.2",
+                                  "--room", "cli", "--member", "tester", "--quiet")
+            self.assertEqual(strip_stats(remote), strip_stats(local))
+            self.assertEqual(remote["room"], "cli")
+            self.assertEqual(remote["latency_ms"]["poses"], 13)
+            p = run(PROXIMA, "verify", "--server", address, "--model", "nope", "--tolerance", "0")
+            self.assertEqual(p.returncode, 1)
+            self.assertIn("NOT_FOUND", p.stderr)
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            proc.stdout.close()
+            proc.stderr.close()
+
+
+if __name__ == "__main__":
+    unittest.main(argv=[sys.argv[0]], verbosity=2)

@@ -1,0 +1,844 @@
+// proximad serving massive models (--models DIR, --cache-bytes): a small store built here (boxes
+// and cylinders, some touching, some within a tolerance, some split into pieces) is listed,
+// verified over gRPC with answers equal to the brute-force reference bit for bit, and reviewed by
+// two members of one room whose results equal in-process AvatarTrackers replaying the same poses
+// and edits. Also: unknown models, bad requests, a corrupt chunk (DATA_LOSS, the daemon serving
+// on), cancellation, and a restart serving the same generation without a re-import.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <string>
+#include <thread>
+#include <tuple>
+#include <vector>
+
+#include <unistd.h>
+
+#include "client/proxima_client.hpp"
+#include "daemon_process.hpp"
+#include "proxima/massive/avatar.hpp"
+#include "proxima/massive/store.hpp"
+#include "proxima/massive/verify.hpp"
+#include "wire.hpp"
+
+namespace proxima::test {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using client::Client;
+using client::ReviewEvent;
+
+constexpr std::uint64_t CACHE_BYTES = 48 * 1024;     // a few pieces at a time: evictions
+constexpr std::uint64_t MAX_PIECE_BYTES = 6 * 1024;  // cylinders split into several pieces
+
+TriangleMesh box_mesh(Vec3 lo, Vec3 hi) {
+    TriangleMesh m;
+    for (int k = 0; k < 8; ++k) {
+        m.vertices.push_back({k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z});
+    }
+    m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                   {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+    return m;
+}
+
+// A closed cylinder of radius r from `base` along +z (axis 2) or +x (axis 0), n segments.
+TriangleMesh cylinder_mesh(Vec3 base, double r, double length, int n, int axis = 2) {
+    TriangleMesh m;
+    auto point = [&](double a, double b, double h) {
+        return axis == 2 ? base + Vec3{a, b, h} : base + Vec3{h, a, b};
+    };
+    for (int ring = 0; ring < 2; ++ring) {
+        for (int k = 0; k < n; ++k) {
+            const double t = 2.0 * M_PI * k / n;
+            m.vertices.push_back(point(r * std::cos(t), r * std::sin(t), ring * length));
+        }
+    }
+    const auto bottom = static_cast<std::uint32_t>(m.vertices.size());
+    m.vertices.push_back(point(0, 0, 0));
+    m.vertices.push_back(point(0, 0, length));
+    const auto top = bottom + 1;
+    for (int k = 0; k < n; ++k) {
+        const auto a = static_cast<std::uint32_t>(k);
+        const auto b = static_cast<std::uint32_t>((k + 1) % n);
+        const auto un = static_cast<std::uint32_t>(n);
+        m.triangles.push_back({a, b, b + un});
+        m.triangles.push_back({a, b + un, a + un});
+        m.triangles.push_back({bottom, b, a});
+        m.triangles.push_back({top, a + un, b + un});
+    }
+    return m;
+}
+
+// 6 x 6 cells 2 apart; in each row, cell pairs touch (0-1), are 0.05 apart (2-3) and overlap by
+// 0.3 (4-5). Odd cells of odd rows are cylinders (split into pieces). Plus a long thin pipe along
+// row 2 that crosses everything there.
+std::vector<massive::ModelObject> model_objects() {
+    std::vector<massive::ModelObject> objects;
+    const double shift[6] = {0.0, -1.0, 0.0, -0.95, 0.0, -1.3};
+    for (int j = 0; j < 6; ++j) {
+        for (int i = 0; i < 6; ++i) {
+            const Vec3 lo{2.0 * i + shift[i], 2.0 * j, 0.0};
+            massive::ModelObject o;
+            o.name = "row-" + std::to_string(j) + "/cell-" + std::to_string(i);
+            if (j % 2 == 1 && i % 2 == 1) {
+                o.mesh = cylinder_mesh(lo + Vec3{0.5, 0.5, 0.0}, 0.5, 1.0, 40);
+            } else {
+                o.mesh = box_mesh(lo, lo + Vec3{1, 1, 1});
+            }
+            objects.push_back(std::move(o));
+        }
+    }
+    massive::ModelObject pipe;
+    pipe.name = "pipe";
+    pipe.mesh = cylinder_mesh({-0.5, 4.5, 1.1}, 0.15, 11.0, 48, 0);
+    objects.push_back(std::move(pipe));
+    return objects;
+}
+
+fs::path make_temp_dir(const std::string& name) {
+    auto p = fs::temp_directory_path() /
+             ("proxima-massive-daemon-" + name + "-" + std::to_string(::getpid()));
+    fs::remove_all(p);
+    fs::create_directories(p);
+    return p;
+}
+
+void flip_byte(const fs::path& path, std::uint64_t at) {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(static_cast<std::streamoff>(at));
+    char b = 0;
+    f.read(&b, 1);
+    b = static_cast<char>(b ^ 0x5a);
+    f.seekp(static_cast<std::streamoff>(at));
+    f.write(&b, 1);
+    ASSERT_TRUE(f.good()) << path;
+}
+
+void write_store(const fs::path& dir) {
+    massive::StoreOptions options;
+    options.max_piece_bytes = MAX_PIECE_BYTES;
+    options.chunk_bytes = 4096;
+    options.source = "test_massive_daemon";
+    auto writer = massive::StoreWriter::create(dir.string(), options);
+    ASSERT_TRUE(writer.ok()) << writer.status().to_string();
+    for (auto& o : model_objects()) {
+        ASSERT_TRUE((*writer)->add(std::move(o)).ok());
+    }
+    auto summary = (*writer)->commit();
+    ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+    ASSERT_GT(summary->split_objects, 0u) << "the test wants objects split into pieces";
+}
+
+class MassiveDaemon : public ::testing::Test {
+  protected:
+    static void SetUpTestSuite() {
+        s_models = new fs::path(make_temp_dir("models"));
+        write_store(*s_models / "plant");
+    }
+    static void TearDownTestSuite() {
+        std::error_code ec;
+        fs::remove_all(*s_models, ec);
+        delete s_models;
+        s_models = nullptr;
+    }
+
+    static std::vector<std::string> daemon_args(const fs::path& models) {
+        return {"--models", models.string(), "--cache-bytes", std::to_string(CACHE_BYTES),
+                "--gpu",    "off",           "--log-level",   "warn"};
+    }
+
+    static std::unique_ptr<Client> connect(const DaemonProcess& daemon) {
+        auto c = Client::connect(daemon.address());
+        EXPECT_TRUE(c.ok()) << c.status().to_string();
+        return c.ok() ? std::move(c).value() : nullptr;
+    }
+
+    static std::shared_ptr<const massive::Store> open_local(const std::string& name = "plant") {
+        auto store = massive::Store::open((*s_models / name).string());
+        EXPECT_TRUE(store.ok()) << store.status().to_string();
+        return store.ok() ? store.value() : nullptr;
+    }
+
+    static fs::path* s_models;
+};
+
+fs::path* MassiveDaemon::s_models = nullptr;
+
+void expect_same_pairs(const std::vector<client::NamedObjectPair>& got,
+                       const std::vector<massive::ObjectPairResult>& want,
+                       const massive::Store& store) {
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t k = 0; k < want.size(); ++k) {
+        SCOPED_TRACE("pair " + std::to_string(k));
+        EXPECT_EQ(got[k].pair, want[k]);  // every field, doubles bit for bit
+        EXPECT_EQ(got[k].name_a, store.objects()[want[k].object_a].name);
+        EXPECT_EQ(got[k].name_b, store.objects()[want[k].object_b].name);
+    }
+}
+
+TEST_F(MassiveDaemon, ListModelsShowsTheStoreAndTheCache) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    auto list = c->list_models();
+    ASSERT_TRUE(list.ok()) << list.status().to_string();
+    EXPECT_EQ(list->models_dir, s_models->string());
+    EXPECT_EQ(list->cache_budget_bytes, CACHE_BYTES);
+    EXPECT_EQ(list->cache.budget_bytes, CACHE_BYTES);
+    EXPECT_TRUE(list->unavailable.empty());
+    ASSERT_EQ(list->models.size(), 1u);
+    const auto& m = list->models[0];
+    const auto& s = store->summary();
+    EXPECT_EQ(m.name, "plant");
+    EXPECT_EQ(m.objects, s.objects);
+    EXPECT_EQ(m.pieces, s.pieces);
+    EXPECT_GT(m.pieces, m.objects);
+    EXPECT_EQ(m.triangles, s.triangles);
+    EXPECT_EQ(m.generation, s.generation);
+    EXPECT_EQ(m.box.lo.x, -0.5);           // the pipe starts there
+    EXPECT_NEAR(m.box.hi.z, 1.25, 1e-12);  // and is the highest object
+
+    // A model imported while the daemon runs appears at the next listing.
+    write_store(*s_models / "later");
+    list = c->list_models();
+    ASSERT_TRUE(list.ok());
+    ASSERT_EQ(list->models.size(), 2u);
+    EXPECT_EQ(list->models[0].name, "later");
+    fs::remove_all(*s_models / "later");
+    list = c->list_models();
+    ASSERT_TRUE(list.ok());
+    EXPECT_EQ(list->models.size(), 1u);
+}
+
+TEST_F(MassiveDaemon, VerifyModelEqualsBruteForce) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    for (double tolerance : {0.0, 0.1}) {
+        SCOPED_TRACE("tolerance " + std::to_string(tolerance));
+        auto want = massive::verify_brute_force(*store, tolerance);
+        ASSERT_TRUE(want.ok()) << want.status().to_string();
+        ASSERT_FALSE(want->empty());
+        std::vector<client::NamedObjectPair> pairs;
+        std::size_t progress = 0;
+        auto summary = c->verify_model("plant", tolerance, [&](const client::VerifyEvent& e) {
+            if (e.kind == client::VerifyEvent::Kind::pair) {
+                pairs.push_back(e.pair);
+            } else {
+                ++progress;
+                EXPECT_LE(e.progress.done,
+                          e.progress.total == 0 ? e.progress.done : e.progress.total);
+            }
+            return true;
+        });
+        ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+        // Pairs arrive as they complete; the reference is sorted by (object_a, object_b).
+        std::sort(pairs.begin(), pairs.end(), [](const auto& x, const auto& y) {
+            return std::tie(x.pair.object_a, x.pair.object_b) <
+                   std::tie(y.pair.object_a, y.pair.object_b);
+        });
+        expect_same_pairs(pairs, want.value(), *store);
+        EXPECT_GT(progress, 0u);
+        EXPECT_EQ(summary->stats.pairs_found, want->size());
+        EXPECT_EQ(summary->stats.objects, store->summary().objects);
+        EXPECT_EQ(summary->stats.pieces, store->summary().pieces);
+        EXPECT_GT(summary->stats.edges, 0u);
+        EXPECT_GT(summary->stats.cache.loads, 0u);
+        EXPECT_EQ(summary->stats.cache.budget_bytes, CACHE_BYTES);
+        EXPECT_GT(summary->server_seconds, 0.0);
+        if (tolerance > 0.0) {
+            // The within-tolerance pairs (0.05 apart) are found, not only contacts.
+            EXPECT_TRUE(std::any_of(pairs.begin(), pairs.end(),
+                                    [](const auto& p) { return p.pair.distance > 0.0; }));
+        }
+    }
+    // A slow reader gets the same answer (the daemon waits instead of buffering).
+    auto want = massive::verify_brute_force(*store, 0.1);
+    ASSERT_TRUE(want.ok());
+    std::vector<client::NamedObjectPair> slow;
+    auto summary = c->verify_model("plant", 0.1, [&](const client::VerifyEvent& e) {
+        if (e.kind == client::VerifyEvent::Kind::pair) {
+            slow.push_back(e.pair);
+            std::this_thread::sleep_for(2ms);
+        }
+        return true;
+    });
+    ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+    EXPECT_TRUE(summary->stats.schedule_from_store);  // planned by the first run at 0.1
+    std::sort(slow.begin(), slow.end(), [](const auto& x, const auto& y) {
+        return std::tie(x.pair.object_a, x.pair.object_b) <
+               std::tie(y.pair.object_a, y.pair.object_b);
+    });
+    expect_same_pairs(slow, want.value(), *store);
+}
+
+TEST_F(MassiveDaemon, UnknownModelsAndBadRequests) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto v = c->verify_model("nope", 0.0);
+    EXPECT_EQ(v.status().code(), StatusCode::not_found) << v.status().to_string();
+    v = c->verify_model("../plant", 0.0);
+    EXPECT_EQ(v.status().code(), StatusCode::invalid_argument) << v.status().to_string();
+    v = c->verify_model("plant", -1.0);
+    EXPECT_EQ(v.status().code(), StatusCode::invalid_argument) << v.status().to_string();
+
+    client::ReviewJoin join{"r", "nope", "alice", {"avatar", box_mesh({0, 0, 0}, {1, 1, 1})}};
+    auto session = c->join_review(join);
+    EXPECT_EQ(session.status().code(), StatusCode::not_found) << session.status().to_string();
+
+    join.model = "plant";
+    join.avatar.mesh.triangles[0][1] = 99;  // index out of range
+    session = c->join_review(join);
+    EXPECT_EQ(session.status().code(), StatusCode::invalid_argument)
+        << session.status().to_string();
+
+    // A pose before join: the generated stub, since the library always joins first.
+    auto stub = make_stub(daemon.address());
+    {
+        grpc::ClientContext context;
+        deadline_in(context, 10s);
+        auto stream = stub->Review(&context);
+        v1::ReviewRequest request;
+        request.mutable_pose()->set_sequence(1);
+        for (int k = 0; k < 12; ++k) {
+            request.mutable_pose()->mutable_transform()->add_m(k % 5 == 0 ? 1.0 : 0.0);
+        }
+        stream->Write(request);
+        stream->WritesDone();
+        v1::ReviewEvent event;
+        EXPECT_FALSE(stream->Read(&event));
+        EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+    }
+
+    // A bad pose ends that member's stream; a second member sees it leave, the room goes on.
+    join = {"r", "plant", "alice", {"avatar", box_mesh({0, 0, 0}, {0.3, 0.3, 0.3})}, 0.0, true};
+    auto alice = c->join_review(join);
+    ASSERT_TRUE(alice.ok()) << alice.status().to_string();
+    join.member = "bob";
+    auto bob = c->join_review(join);
+    ASSERT_TRUE(bob.ok()) << bob.status().to_string();
+    ASSERT_EQ((*bob)->joined().members.size(), 2u);
+    join.member = "alice";  // a name already in the room
+    auto twin = c->join_review(join);
+    EXPECT_EQ(twin.status().code(), StatusCode::failed_precondition);
+    massive::Affine nan_pose;
+    nan_pose.m[3] = std::nan("");
+    ASSERT_TRUE((*alice)->send_pose(1, nan_pose).ok());
+    std::optional<Status> alice_end;
+    for (int k = 0; k < 10 && !alice_end; ++k) {
+        auto e = (*alice)->next(5s);
+        if (!e.ok()) {
+            alice_end = e.status();
+        }
+    }
+    ASSERT_TRUE(alice_end);
+    EXPECT_EQ(alice_end->code(), StatusCode::invalid_argument) << alice_end->to_string();
+    bool left = false;
+    for (int k = 0; k < 10 && !left; ++k) {
+        auto e = (*bob)->next(5s);
+        ASSERT_TRUE(e.ok()) << e.status().to_string();
+        left = e->kind == ReviewEvent::Kind::member_left && e->member == "alice";
+    }
+    EXPECT_TRUE(left);
+    ASSERT_TRUE((*bob)->send_pose(7, massive::Affine{}).ok());
+    auto r = (*bob)->wait_result(7);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    // Unknown object in an edit: NOT_FOUND, and the room's model is unchanged.
+    ASSERT_TRUE((*bob)->delete_object(1, 9999).ok());
+    auto end = (*bob)->next(5s);
+    while (end.ok()) {
+        end = (*bob)->next(5s);
+    }
+    EXPECT_EQ(end.status().code(), StatusCode::not_found) << end.status().to_string();
+    // The daemon serves on.
+    EXPECT_TRUE(c->list_models().ok());
+}
+
+// A member's view of the room, replayed in-process: its own tracker on a local ModelView that
+// receives the same edits in the same order.
+struct LocalMember {
+    std::shared_ptr<massive::ModelView> view;
+    std::unique_ptr<massive::AvatarTracker> tracker;
+    massive::AvatarQueryOptions options;
+};
+
+massive::Affine translation(double x, double y, double z) {
+    massive::Affine a;
+    a.m[3] = x;
+    a.m[7] = y;
+    a.m[11] = z;
+    return a;
+}
+
+void expect_same_hit(const massive::AvatarHit& got, const massive::AvatarHit& want) {
+    EXPECT_EQ(got.object, want.object);
+    EXPECT_EQ(got.distance, want.distance);
+    EXPECT_EQ(got.object_triangle, want.object_triangle);
+    EXPECT_EQ(got.avatar_triangle, want.avatar_triangle);
+    EXPECT_EQ(got.object_point, want.object_point);
+    EXPECT_EQ(got.avatar_point, want.avatar_point);
+}
+
+void expect_same_result(const client::ReviewPoseResult& got, const massive::AvatarResult& want,
+                        const massive::ModelView& view) {
+    ASSERT_EQ(got.result.collisions.size(), want.collisions.size());
+    ASSERT_EQ(got.result.within.size(), want.within.size());
+    for (std::size_t k = 0; k < want.collisions.size(); ++k) {
+        expect_same_hit(got.result.collisions[k], want.collisions[k]);
+        EXPECT_EQ(got.collision_names[k], view.object_name(want.collisions[k].object).value());
+    }
+    for (std::size_t k = 0; k < want.within.size(); ++k) {
+        expect_same_hit(got.result.within[k], want.within[k]);
+        EXPECT_EQ(got.within_names[k], view.object_name(want.within[k].object).value());
+    }
+    ASSERT_EQ(got.result.nearest.has_value(), want.nearest.has_value());
+    if (want.nearest) {
+        expect_same_hit(*got.result.nearest, *want.nearest);
+        EXPECT_EQ(got.nearest_name, view.object_name(want.nearest->object).value());
+    }
+    EXPECT_EQ(got.result.candidate_pieces, want.candidate_pieces);
+}
+
+TEST_F(MassiveDaemon, TwoMembersReviewOneRoomWithEdits) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    auto cache = std::make_shared<massive::GeometryCache>(CACHE_BYTES);
+    auto local_view = std::make_shared<massive::ModelView>(store, cache);
+
+    const double tolerance = 0.2;
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    std::map<std::string, LocalMember> local;
+    std::map<std::string, std::unique_ptr<client::ReviewSession>> remote;
+    for (const std::string name : {"alice", "bob"}) {
+        client::ReviewJoin join{"design-1", "plant", name, avatar, tolerance, true};
+        auto session = c->join_review(join);
+        ASSERT_TRUE(session.ok()) << session.status().to_string();
+        EXPECT_EQ((*session)->joined().room, "design-1");
+        EXPECT_EQ((*session)->joined().generation, store->summary().generation);
+        EXPECT_EQ((*session)->joined().members.back().name, name);
+        remote[name] = std::move(session).value();
+        auto tracker = massive::AvatarTracker::create(local_view, avatar.mesh);
+        ASSERT_TRUE(tracker.ok());
+        local[name] = {local_view, std::move(tracker).value(), {tolerance, true}};
+    }
+    // Alice was alone when she joined; she hears about Bob.
+    auto joined = remote["alice"]->next(5s);
+    ASSERT_TRUE(joined.ok()) << joined.status().to_string();
+    EXPECT_EQ(joined->kind, ReviewEvent::Kind::member_joined);
+    EXPECT_EQ(joined->member, "bob");
+    EXPECT_EQ(remote["bob"]->joined().members.size(), 2u);
+
+    // Peer updates each member has seen, by peer: the latest sequence.
+    std::map<std::string, std::map<std::string, client::ReviewPeerUpdate>> peers;
+    std::map<std::string, std::vector<client::ReviewEditApplied>> edits;
+    auto record = [&](const std::string& who) {
+        return [&, who](const ReviewEvent& e) {
+            if (e.kind == ReviewEvent::Kind::peer) {
+                peers[who][e.peer.member] = e.peer;
+            } else if (e.kind == ReviewEvent::Kind::edit_applied) {
+                edits[who].push_back(e.edit);
+            }
+        };
+    };
+    std::uint64_t sequence = 0;
+    std::map<std::string, client::ReviewPoseResult> last;
+    std::size_t collisions = 0;
+    std::size_t within = 0;
+    // One pose of `who` at `pose`: the daemon's answer equals the local tracker's.
+    auto step = [&](const std::string& who, const massive::Affine& pose) {
+        SCOPED_TRACE(who + " pose " + std::to_string(sequence + 1));
+        ++sequence;
+        ASSERT_TRUE(remote[who]->send_pose(sequence, pose).ok());
+        auto got = remote[who]->wait_result(sequence, record(who));
+        ASSERT_TRUE(got.ok()) << got.status().to_string();
+        auto& m = local[who];
+        auto want = m.tracker->query(pose, m.options);
+        ASSERT_TRUE(want.ok()) << want.status().to_string();
+        EXPECT_EQ(got->model_version, local_view->version());
+        expect_same_result(got.value(), want.value(), *local_view);
+        collisions += got->result.collisions.size();
+        within += got->result.within.size();
+        last[who] = std::move(got).value();
+    };
+    // Alice walks row 0 (y = 0.5), Bob row 1 (y = 2.5), through contacts, gaps and overlaps.
+    for (int k = 0; k <= 24; ++k) {
+        const double x = -0.5 + 0.5 * k;
+        step("alice", translation(x, 0.5, 0.5));
+        step("bob", translation(x, 2.5, 0.5));
+    }
+    // Each has seen the other's latest pose (drain what is pending).
+    for (const std::string who : {"alice", "bob"}) {
+        while (true) {
+            auto e = remote[who]->next(300ms);
+            if (!e.ok()) {
+                break;
+            }
+            record(who)(e.value());
+        }
+    }
+    ASSERT_EQ(peers["alice"].count("bob"), 1u);
+    ASSERT_EQ(peers["bob"].count("alice"), 1u);
+    EXPECT_EQ(peers["alice"]["bob"].sequence, sequence);
+    EXPECT_EQ(peers["bob"]["alice"].sequence, sequence - 1);
+    EXPECT_EQ(peers["alice"]["bob"].transform.m, translation(11.5, 2.5, 0.5).m);
+    // The walks went through contacts and near misses, and what peers see is the sender's result.
+    EXPECT_GT(collisions, 0u);
+    EXPECT_GT(within, collisions);
+    for (const auto& [who, other] : {std::pair{"alice", "bob"}, std::pair{"bob", "alice"}}) {
+        const auto& summary = peers[who][other].summary;
+        const auto& result = last[other];
+        EXPECT_EQ(summary.collisions, result.result.collisions.size());
+        EXPECT_EQ(summary.within, result.result.within.size());
+        ASSERT_EQ(summary.has_nearest, result.result.nearest.has_value());
+        if (summary.has_nearest) {
+            EXPECT_EQ(summary.nearest_object, result.result.nearest->object);
+            EXPECT_EQ(summary.nearest_distance, result.result.nearest->distance);
+            EXPECT_EQ(summary.nearest_name, result.nearest_name);
+        }
+    }
+
+    // Edits by Alice, in Bob's way: every member sees each one, Bob's results change with them.
+    auto edit_seen = [&](const std::string& who, std::uint64_t edit_sequence) {
+        for (int k = 0; k < 50; ++k) {
+            for (const auto& e : edits[who]) {
+                if (e.member == "alice" && e.sequence == edit_sequence) {
+                    return e;
+                }
+            }
+            auto e = remote[who]->next(5s);
+            EXPECT_TRUE(e.ok()) << e.status().to_string();
+            if (!e.ok()) {
+                break;
+            }
+            record(who)(e.value());
+        }
+        ADD_FAILURE() << who << " never saw edit " << edit_sequence;
+        return client::ReviewEditApplied{};
+    };
+    // Beyond the model: nothing near. (Surfaces count: an avatar wholly inside a box without
+    // touching its faces is 0.35 away from it, so the poses below straddle faces.)
+    const massive::Affine bob_at = translation(20.55, 2.5, 0.5);
+    step("bob", bob_at);
+
+    // 1. Move object 0 (row 0, cell 0, a box at x 0..1, y 0..1) under Bob's avatar.
+    ASSERT_TRUE(remote["alice"]->move_object(101, 0, translation(19.6, 2.0, 0.0)).ok());
+    auto moved = edit_seen("bob", 101);
+    EXPECT_EQ(moved.what, client::ReviewEditKind::move);
+    EXPECT_EQ(moved.object, 0u);
+    EXPECT_EQ(moved.object_name, "row-0/cell-0");
+    EXPECT_EQ(edit_seen("alice", 101).model_version, moved.model_version);
+    ASSERT_TRUE(local_view->move_object(0, translation(19.6, 2.0, 0.0)).ok());
+    EXPECT_EQ(moved.model_version, local_view->version());
+    step("bob", bob_at);
+    {
+        // Bob now collides with the moved box.
+        ASSERT_TRUE(remote["bob"]->send_pose(++sequence, bob_at).ok());
+        auto got = remote["bob"]->wait_result(sequence, record("bob"));
+        ASSERT_TRUE(got.ok());
+        ASSERT_EQ(got->result.collisions.size(), 1u);
+        EXPECT_EQ(got->result.collisions[0].object, 0u);
+        EXPECT_EQ(got->collision_names[0], "row-0/cell-0");
+        auto want = local["bob"].tracker->query(bob_at, local["bob"].options);
+        ASSERT_TRUE(want.ok());
+    }
+
+    // 2. Add an object where Bob will stand next.
+    const massive::Affine bob_next = translation(25.0, 2.5, 0.5);
+    const NamedMesh added{"crate", box_mesh({24.9, 2.4, 0.4}, {25.6, 3.0, 1.0})};
+    ASSERT_TRUE(remote["alice"]->add_object(102, added).ok());
+    auto add_seen = edit_seen("bob", 102);
+    EXPECT_EQ(add_seen.what, client::ReviewEditKind::add);
+    EXPECT_EQ(add_seen.object_name, "crate");
+    auto local_id = local_view->add_object({added.name, added.mesh});
+    ASSERT_TRUE(local_id.ok());
+    EXPECT_EQ(add_seen.object, local_id.value());
+    EXPECT_EQ(add_seen.object, store->objects().size());
+    EXPECT_EQ(edit_seen("alice", 102).object, add_seen.object);
+    step("bob", bob_next);
+    ASSERT_EQ(last["bob"].result.collisions.size(), 1u);
+    EXPECT_EQ(last["bob"].result.collisions[0].object, add_seen.object);
+    EXPECT_EQ(last["bob"].collision_names[0], "crate");
+
+    // 3. Delete the moved box: Bob at bob_at sees nothing again.
+    ASSERT_TRUE(remote["alice"]->delete_object(103, 0).ok());
+    auto deleted = edit_seen("bob", 103);
+    EXPECT_EQ(deleted.what, client::ReviewEditKind::remove);
+    EXPECT_EQ(deleted.object, 0u);
+    EXPECT_EQ(deleted.object_name, "row-0/cell-0");
+    ASSERT_TRUE(local_view->delete_object(0).ok());
+    step("bob", bob_at);
+    EXPECT_TRUE(last["bob"].result.collisions.empty());
+    step("alice", translation(0.95, 0.5, 0.5));  // where box 0 was: gone for Alice too
+    step("bob", bob_next);
+
+    // A second room on the same model does not see the first room's edits.
+    client::ReviewJoin other{"design-2", "plant", "carol", avatar, tolerance, true};
+    auto carol = c->join_review(other);
+    ASSERT_TRUE(carol.ok()) << carol.status().to_string();
+    EXPECT_EQ((*carol)->joined().model_version, 0u);
+    ASSERT_TRUE((*carol)->send_pose(1, translation(0.95, 0.5, 0.5)).ok());
+    auto carol_result = (*carol)->wait_result(1);
+    ASSERT_TRUE(carol_result.ok());
+    ASSERT_FALSE(carol_result->result.collisions.empty());
+    EXPECT_EQ(carol_result->result.collisions[0].object, 0u);  // box 0 still there
+    EXPECT_TRUE((*carol)->finish().ok());
+
+    // Bob leaves: Alice sees it; her stream ends cleanly.
+    EXPECT_TRUE(remote["bob"]->finish().ok());
+    bool left = false;
+    for (int k = 0; k < 50 && !left; ++k) {
+        auto e = remote["alice"]->next(5s);
+        ASSERT_TRUE(e.ok()) << e.status().to_string();
+        left = e->kind == ReviewEvent::Kind::member_left && e->member == "bob";
+    }
+    EXPECT_TRUE(left);
+    EXPECT_TRUE(remote["alice"]->finish().ok());
+    // The room went with its last member, and its edits with it: joining the same name starts a
+    // fresh room on the stored model.
+    auto again = c->join_review({"design-1", "plant", "dave", avatar, tolerance, true});
+    ASSERT_TRUE(again.ok()) << again.status().to_string();
+    EXPECT_EQ((*again)->joined().members.size(), 1u);
+    EXPECT_EQ((*again)->joined().model_version, 0u);
+    EXPECT_EQ((*again)->joined().object_count, store->objects().size());
+}
+
+// A member that stops reading, on a raw stub with a small flow-control window (so the
+// transport stops accepting the daemon's writes instead of buffering on the client's side).
+struct StalledMember {
+    grpc::ClientContext context;
+    std::shared_ptr<grpc::Channel> channel;
+    std::unique_ptr<v1::Proximity::Stub> stub;
+    std::unique_ptr<grpc::ClientReaderWriter<v1::ReviewRequest, v1::ReviewEvent>> stream;
+
+    StalledMember(const std::string& address, const std::string& room, const NamedMesh& avatar) {
+        grpc::ChannelArguments args;
+        args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+        args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+        args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 16 * 1024);
+        channel = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+        stub = v1::Proximity::NewStub(channel);
+        stream = stub->Review(&context);
+        v1::ReviewRequest join;
+        join.mutable_join()->set_room(room);
+        join.mutable_join()->set_model("plant");
+        join.mutable_join()->set_member("stalled");
+        join.mutable_join()->set_tolerance(0.1);
+        set_mesh(avatar, join.mutable_join()->mutable_avatar());
+        EXPECT_TRUE(stream->Write(join));
+        v1::ReviewEvent joined;
+        EXPECT_TRUE(stream->Read(&joined));
+        EXPECT_TRUE(joined.has_joined());
+    }
+};
+
+// Backpressure: a member that does not read gets each peer's latest pose, not every pose; one
+// that falls more than the bound behind on events that cannot be coalesced (joins, leaves,
+// edits) is disconnected with RESOURCE_EXHAUSTED, the room going on without it.
+TEST_F(MassiveDaemon, SlowMembersGetCoalescedPosesThenAreDisconnected) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    auto alice = c->join_review({"busy", "plant", "alice", avatar, 0.1, true});
+    ASSERT_TRUE(alice.ok()) << alice.status().to_string();
+    StalledMember stalled(daemon.address(), "busy", avatar);
+    ASSERT_TRUE((*alice)->next(5s).ok());  // member_joined
+
+    constexpr std::uint64_t POSES = 2000;
+    for (std::uint64_t k = 1; k <= POSES; ++k) {
+        ASSERT_TRUE(
+            (*alice)->send_pose(k, translation(0.01 * static_cast<double>(k), 0.5, 0.5)).ok());
+        auto r = (*alice)->wait_result(k);
+        ASSERT_TRUE(r.ok()) << r.status().to_string();
+    }
+    // Joins and leaves cannot be coalesced: members with long names come and go until the
+    // stalled member is more than the bound behind and is cut off; Alice sees it leave.
+    bool gone = false;
+    std::uint64_t visits = 0;
+    for (; visits < 2000 && !gone; ++visits) {
+        client::ReviewJoin visit{"busy", "plant", std::string(2000, 'v') + std::to_string(visits),
+                                 avatar, 0.1,     true};
+        auto visitor = c->join_review(visit);
+        ASSERT_TRUE(visitor.ok()) << visitor.status().to_string();
+        ASSERT_TRUE((*visitor)->finish().ok());
+        for (;;) {
+            auto e = (*alice)->next(5s);
+            ASSERT_TRUE(e.ok()) << e.status().to_string();
+            if (e->kind == ReviewEvent::Kind::member_left) {
+                if (e->member == "stalled") {
+                    gone = true;
+                } else {
+                    break;
+                }
+            }
+        }
+    }
+    ASSERT_TRUE(gone) << "the stalled member was never disconnected after " << visits << " visits";
+    // What the stalled member got: some of Alice's poses (coalesced: fewer than she sent, in
+    // order), then the status.
+    std::uint64_t peer_events = 0;
+    std::uint64_t last_sequence = 0;
+    v1::ReviewEvent event;
+    while (stalled.stream->Read(&event)) {
+        if (event.has_peer()) {
+            EXPECT_GT(event.peer().sequence(), last_sequence);
+            last_sequence = event.peer().sequence();
+            ++peer_events;
+        }
+    }
+    const auto status = stalled.stream->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    // (The poses still queued when it was cut off are dropped with it.)
+    EXPECT_GT(peer_events, 0u);
+    EXPECT_LT(peer_events, POSES) << "a reader that stalled should have had poses coalesced";
+    // Alice goes on.
+    ASSERT_TRUE((*alice)->send_pose(POSES + 1, translation(0.5, 0.5, 0.5)).ok());
+    EXPECT_TRUE((*alice)->wait_result(POSES + 1).ok());
+    EXPECT_TRUE((*alice)->finish().ok());
+}
+
+TEST_F(MassiveDaemon, CorruptChunkIsDataLossAndTheDaemonServesOn) {
+    const fs::path models = make_temp_dir("corrupt");
+    fs::copy(*s_models / "plant", models / "plant", fs::copy_options::recursive);
+    fs::copy(*s_models / "plant", models / "broken", fs::copy_options::recursive);
+    // Flip a byte in the middle of the first chunk file of "broken".
+    std::string generation;
+    {
+        std::ifstream in(models / "broken" / "CURRENT");
+        in >> generation;
+    }
+    // One byte in every chunk of "broken", so whichever piece the traversal reads first is bad.
+    ASSERT_TRUE(fs::exists(models / "broken" / generation / "chunks-0000.bin"));
+    for (const auto& file : fs::directory_iterator(models / "broken" / generation)) {
+        if (file.path().filename().string().rfind("chunks-", 0) != 0) {
+            continue;
+        }
+        const auto size = fs::file_size(file.path());
+        for (std::uint64_t at = 100; at < size; at += 4096) {
+            flip_byte(file.path(), at);
+        }
+    }
+    DaemonProcess daemon(daemon_args(models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto v = c->verify_model("broken", 0.1);
+    EXPECT_EQ(v.status().code(), StatusCode::data_loss) << v.status().to_string();
+    EXPECT_NE(v.status().message().find("chunk"), std::string::npos) << v.status().message();
+    EXPECT_TRUE(daemon.running());
+    auto list = c->list_models();
+    ASSERT_TRUE(list.ok()) << list.status().to_string();
+    EXPECT_EQ(list->models.size(), 2u);
+    auto good = c->verify_model("plant", 0.1);
+    EXPECT_TRUE(good.ok()) << good.status().to_string();
+    auto info = c->server_info();
+    EXPECT_TRUE(info.ok());
+    // A review pose that needs a corrupt piece ends that member's stream with DATA_LOSS.
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    auto member = c->join_review({"r", "broken", "alice", avatar, 0.5, true});
+    ASSERT_TRUE(member.ok()) << member.status().to_string();
+    ASSERT_TRUE((*member)->send_pose(1, translation(0.95, 0.5, 0.5)).ok());
+    auto pose = (*member)->wait_result(1);
+    EXPECT_EQ(pose.status().code(), StatusCode::data_loss) << pose.status().to_string();
+
+    // A corrupt manifest: the store is listed as unavailable, not fatal.
+    fs::copy(models / "plant", models / "bad-manifest", fs::copy_options::recursive);
+    const fs::path manifest = models / "bad-manifest" / generation / "manifest.json";
+    ASSERT_TRUE(fs::exists(manifest));
+    flip_byte(manifest, fs::file_size(manifest) / 2);
+    list = c->list_models();
+    ASSERT_TRUE(list.ok());
+    EXPECT_EQ(list->models.size(), 2u);
+    ASSERT_EQ(list->unavailable.size(), 1u);
+    EXPECT_EQ(list->unavailable[0].first, "bad-manifest");
+    auto bad = c->verify_model("bad-manifest", 0.0);
+    EXPECT_EQ(bad.status().code(), StatusCode::data_loss) << bad.status().to_string();
+    // And a daemon started on that directory starts anyway.
+    DaemonProcess second(daemon_args(models));
+    EXPECT_TRUE(second.ok()) << second.error();
+    std::error_code ec;
+    fs::remove_all(models, ec);
+}
+
+TEST_F(MassiveDaemon, SigtermEndsReviewStreamsAndExitsZero) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    auto alice = c->join_review({"r", "plant", "alice", avatar, 0.1, true});
+    ASSERT_TRUE(alice.ok()) << alice.status().to_string();
+    ASSERT_TRUE((*alice)->send_pose(1, translation(0.95, 0.5, 0.5)).ok());
+    ASSERT_TRUE((*alice)->wait_result(1).ok());
+    daemon.signal(SIGTERM);
+    auto end = (*alice)->next(10s);
+    EXPECT_EQ(end.status().code(), StatusCode::unavailable) << end.status().to_string();
+    const auto status = daemon.wait_exit(20s);
+    ASSERT_TRUE(status.has_value()) << "proximad did not exit after SIGTERM";
+    EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0);
+}
+
+TEST_F(MassiveDaemon, CancelledVerificationStopsAndTheDaemonServesOn) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto v = c->verify_model("plant", 0.3, [](const client::VerifyEvent&) { return false; });
+    EXPECT_EQ(v.status().code(), StatusCode::cancelled) << v.status().to_string();
+    auto again = c->verify_model("plant", 0.0);
+    EXPECT_TRUE(again.ok()) << again.status().to_string();
+}
+
+TEST_F(MassiveDaemon, RestartServesTheSameGenerationWithoutReimport) {
+    std::string generation;
+    std::uint64_t pairs = 0;
+    {
+        DaemonProcess daemon(daemon_args(*s_models));
+        ASSERT_TRUE(daemon.ok()) << daemon.error();
+        auto c = connect(daemon);
+        ASSERT_TRUE(c);
+        auto list = c->list_models();
+        ASSERT_TRUE(list.ok());
+        ASSERT_EQ(list->models.size(), 1u);
+        generation = list->models[0].generation;
+        auto v = c->verify_model("plant", 0.0);
+        ASSERT_TRUE(v.ok()) << v.status().to_string();
+        pairs = v->stats.pairs_found;
+    }
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto list = c->list_models();
+    ASSERT_TRUE(list.ok());
+    ASSERT_EQ(list->models.size(), 1u);
+    EXPECT_EQ(list->models[0].generation, generation);
+    auto v = c->verify_model("plant", 0.0);
+    ASSERT_TRUE(v.ok()) << v.status().to_string();
+    EXPECT_EQ(v->stats.pairs_found, pairs);
+    EXPECT_TRUE(v->stats.schedule_from_store);  // the plan persisted with the store
+    EXPECT_EQ(open_local()->summary().generation, generation);
+}
+
+}  // namespace
+}  // namespace proxima::test
