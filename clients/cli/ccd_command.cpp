@@ -33,11 +33,6 @@ struct CcdArgs {
     std::vector<std::string> files;
 };
 
-int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
-    return 1;
-}
-
 nlohmann::json pair_json(const ccd::CcdPair& p) {
     return {{"kind", ccd::ccd_kind_name(p.kind)},
             {"object", p.object},

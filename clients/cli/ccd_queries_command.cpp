@@ -52,11 +52,6 @@ struct FileSummary {
     double seconds = 0.0;
 };
 
-int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
-    return 1;
-}
-
 int run_ccd_queries(const CcdQueriesArgs& args) {
     ccd::ElementaryOptions options;
     options.min_distance = args.min_distance;

@@ -33,9 +33,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
-    return 1;
+// "15M" -> 15,000,000 (a count: powers of 1000), at most 10^12.
+StatusOr<std::uint64_t> parse_triangles(const std::string& text) {
+    auto n = parse_size("--triangles", text, 1000);
+    if (n.ok() && *n > 1'000'000'000'000ull) {
+        return invalid_argument("--triangles '" + text + "': at most 1T (10^12) triangles");
+    }
+    return n;
 }
 
 struct GenerateArgs {
@@ -46,37 +50,6 @@ struct GenerateArgs {
     bool verify = false;
     bool quiet = false;
 };
-
-// "15M" -> 15,000,000; "2.5M", "10K", "1G", "300000" too.
-StatusOr<std::uint64_t> parse_count(const std::string& text) {
-    auto bad = [&] {
-        return invalid_argument("--triangles '" + text +
-                                "': expected a positive number with an optional K, M or G suffix");
-    };
-    std::size_t used = 0;
-    double value = 0.0;
-    try {
-        value = std::stod(text, &used);
-    } catch (const std::exception&) {
-        return bad();
-    }
-    const std::string suffix = text.substr(used);
-    double scale = 1.0;
-    if (suffix == "K" || suffix == "k") {
-        scale = 1e3;
-    } else if (suffix == "M" || suffix == "m") {
-        scale = 1e6;
-    } else if (suffix == "G" || suffix == "g") {
-        scale = 1e9;
-    } else if (!suffix.empty()) {
-        return bad();
-    }
-    const double count = std::round(value * scale);
-    if (!std::isfinite(count) || count < 1.0 || count > 1e12) {
-        return bad();
-    }
-    return static_cast<std::uint64_t>(count);
-}
 
 template <class T>
 void append_le(std::string& out, T value) {
@@ -153,7 +126,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 }
 
 int run_plant(const GenerateArgs& args) {
-    auto triangles = parse_count(args.triangles);
+    auto triangles = parse_triangles(args.triangles);
     if (!triangles.ok()) {
         return fail(triangles.status());
     }
@@ -233,7 +206,7 @@ int run_plant(const GenerateArgs& args) {
 }
 
 int run_building(const GenerateArgs& args) {
-    auto triangles = parse_count(args.triangles);
+    auto triangles = parse_triangles(args.triangles);
     if (!triangles.ok()) {
         return fail(triangles.status());
     }

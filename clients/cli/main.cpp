@@ -26,10 +26,7 @@ namespace {
 
 using namespace proxima;
 
-int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
-    return 1;
-}
+using proxima::cli::fail;
 
 double milliseconds_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)

@@ -44,55 +44,8 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
-    return 1;
-}
-
 double seconds_since(Clock::time_point start) {
     return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// "160M" -> 160 MiB; "4096", "1.5G", "64KiB" too (binary units, as `proxima import`).
-StatusOr<std::uint64_t> parse_bytes(const std::string& option, const std::string& text) {
-    auto bad = [&] {
-        return invalid_argument(option + " '" + text +
-                                "': expected a number of bytes with an optional K, M or G suffix");
-    };
-    std::size_t used = 0;
-    double value = 0;
-    try {
-        value = std::stod(text, &used);
-    } catch (const std::exception&) {
-        return bad();
-    }
-    std::string suffix = text.substr(used);
-    for (auto& c : suffix) {
-        c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-    }
-    if (suffix.size() > 1 && suffix.back() == 'B') {
-        suffix.pop_back();
-        if (!suffix.empty() && suffix.back() == 'I') {
-            suffix.pop_back();
-        }
-    } else if (suffix == "B") {
-        suffix.clear();
-    }
-    double scale = 1;
-    if (suffix == "K") {
-        scale = 1024.0;
-    } else if (suffix == "M") {
-        scale = 1024.0 * 1024.0;
-    } else if (suffix == "G") {
-        scale = 1024.0 * 1024.0 * 1024.0;
-    } else if (!suffix.empty()) {
-        return bad();
-    }
-    const double bytes = std::round(value * scale);
-    if (!std::isfinite(bytes) || bytes < 1 || bytes > 1.8e19) {
-        return bad();
-    }
-    return static_cast<std::uint64_t>(bytes);
 }
 
 StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address) {
@@ -374,7 +327,7 @@ int run_verify(const VerifyArgs& args) {
     }
     std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
     if (!args.cache_bytes.empty()) {
-        auto v = parse_bytes("--cache-bytes", args.cache_bytes);
+        auto v = parse_size("--cache-bytes", args.cache_bytes, 1024);
         if (!v.ok()) {
             return fail(v.status());
         }
@@ -673,7 +626,7 @@ int run_review(const ReviewArgs& args) {
     }
     std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
     if (!args.cache_bytes.empty()) {
-        auto v = parse_bytes("--cache-bytes", args.cache_bytes);
+        auto v = parse_size("--cache-bytes", args.cache_bytes, 1024);
         if (!v.ok()) {
             return fail(v.status());
         }

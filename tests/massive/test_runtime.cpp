@@ -341,7 +341,7 @@ void check_against_engine(const ModelView& view, const std::vector<TriangleMesh>
         if (objects[o].triangles.empty()) {
             continue;  // deleted
         }
-        ASSERT_TRUE(ref.engine.scene().add_object({"o" + std::to_string(o), objects[o]}).ok());
+        ASSERT_TRUE(ref.engine.scene().add_object({std::to_string(o), objects[o]}).ok());
         ref.model_object.push_back(o);
     }
     ASSERT_TRUE(ref.engine.scene().add_object({"avatar", avatar_posed}).ok());

@@ -54,11 +54,7 @@ void PieceIndex::within(const Aabb& box, double radius, double slack,
 
 ModelView::ModelView(std::shared_ptr<const Store> store, std::shared_ptr<GeometryCache> cache)
     : m_store(std::move(store)), m_cache(std::move(cache)), m_index(m_store->pieces()) {
-    double scale = 0.0;
-    for (const auto& o : m_store->objects()) {
-        scale = std::max(scale, coordinate_scale(o.box));
-    }
-    m_slack = rounding_slack(scale);
+    m_slack = model_slack(*m_store);
     auto s = std::make_shared<Snapshot>();
     s->masked.assign(m_store->objects().size(), 0);
     m_snapshot = std::move(s);

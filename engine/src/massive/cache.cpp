@@ -437,12 +437,18 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     return handle;
 }
 
-void GeometryCache::evict_locked() {
-    // Recompute the resident total (hierarchies grow without taking the cache lock).
+std::int64_t GeometryCache::resident_locked() const {
+    // Summed on demand: hierarchies grow without taking the cache lock.
     std::int64_t total = 0;
     for (const auto& [k, e] : m_entries) {
         total += entry_bytes(e->tree_bytes, e->charged);
     }
+    return total;
+}
+
+void GeometryCache::evict_locked() {
+    // Recompute the resident total (hierarchies grow without taking the cache lock).
+    std::int64_t total = resident_locked();
     auto it = m_lru.end();
     while (total > static_cast<std::int64_t>(m_budget) && it != m_lru.begin()) {
         --it;
@@ -457,7 +463,6 @@ void GeometryCache::evict_locked() {
         m_entries.erase(e);
         it = m_lru.erase(it);
     }
-    m_resident.store(total, std::memory_order_relaxed);
     m_stats.peak_bytes = std::max(m_stats.peak_bytes, total);
 }
 
@@ -503,10 +508,7 @@ bool GeometryCache::resident(const Store& store, std::uint32_t piece) const {
 CacheStats GeometryCache::stats() const {
     std::lock_guard lock(m_mutex);
     CacheStats s = m_stats;
-    std::int64_t total = 0;
-    for (const auto& [k, e] : m_entries) {
-        total += entry_bytes(e->tree_bytes, e->charged);
-    }
+    std::int64_t total = resident_locked();
     s.resident_bytes = total;
     s.peak_bytes = std::max(s.peak_bytes, total);
     return s;
@@ -524,13 +526,6 @@ CacheStats counters_since(const CacheStats& before, const CacheStats& after) {
     d.evictions -= before.evictions;
     d.blocked_seconds -= before.blocked_seconds;
     return d;
-}
-
-void GeometryCache::reset_counters() {
-    std::lock_guard lock(m_mutex);
-    const auto budget = m_stats.budget_bytes;
-    m_stats = {};
-    m_stats.budget_bytes = budget;
 }
 
 void GeometryCache::clear() {

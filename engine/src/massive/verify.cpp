@@ -24,14 +24,6 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-double model_scale(const Store& store) {
-    double s = 0.0;
-    for (const auto& o : store.objects()) {
-        s = std::max(s, coordinate_scale(o.box));
-    }
-    return s;
-}
-
 std::uint64_t pair_key(std::uint32_t a, std::uint32_t b) {
     return (static_cast<std::uint64_t>(a) << 32) | b;
 }
@@ -150,7 +142,7 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
     stats.object_pairs = pairs.size();
 
     const double tol_sq = options.tolerance * options.tolerance;
-    const double slack = rounding_slack(model_scale(*store));
+    const double slack = model_slack(*store);
     const std::uint64_t prefetch_budget =
         static_cast<std::uint64_t>(options.prefetch_share * static_cast<double>(cache.budget()));
     const std::uint64_t stream = reinterpret_cast<std::uintptr_t>(&stats);
@@ -281,6 +273,14 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
     return stats;
 }
 
+double model_slack(const Store& store) {
+    double scale = 0.0;
+    for (const auto& o : store.objects()) {
+        scale = std::max(scale, coordinate_scale(o.box));
+    }
+    return rounding_slack(scale);
+}
+
 StatusOr<TriangleMesh> read_object(const Store& store, std::uint32_t object) {
     if (object >= store.objects().size()) {
         return not_found("object " + std::to_string(object) + " not in the store");
@@ -385,7 +385,7 @@ StatusOr<std::vector<ObjectPairResult>> verify_brute_force(const Store& store, d
         trees[i].build(meshes[i].vertices, topology);
     });
     const double tol_sq = tolerance * tolerance;
-    const double slack = rounding_slack(model_scale(store));
+    const double slack = model_slack(store);
     std::vector<std::vector<ObjectPairResult>> per(n);
     std::atomic<bool> stopped{false};
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {

@@ -131,7 +131,6 @@ class GeometryCache {
     bool resident(const Store& store, std::uint32_t piece) const;
 
     CacheStats stats() const;
-    void reset_counters();  // keeps residency and budget
     std::uint64_t budget() const { return m_budget; }
     // Drops every unpinned piece (tests and benchmarks start cold).
     void clear();
@@ -151,6 +150,7 @@ class GeometryCache {
     StatusOr<PieceHandle> load(const std::shared_ptr<const Store>& store, std::uint32_t piece,
                                bool by_prefetch);
     void evict_locked();
+    std::int64_t resident_locked() const;
     void prefetch_loop();
 
     const std::uint64_t m_budget;
@@ -158,7 +158,6 @@ class GeometryCache {
     std::condition_variable m_loaded;
     std::unordered_map<Key, std::shared_ptr<Entry>, KeyHash> m_entries;
     std::list<Key> m_lru;  // front: most recently used
-    std::atomic<std::int64_t> m_resident{0};
     CacheStats m_stats;
 
     struct Hint {

@@ -32,7 +32,7 @@ struct StoreOptions {
     // Fixed chunk size (the last chunk may be shorter). A read checks whole chunks: 64 KiB keeps
     // random piece reads within ~1.3x of the bytes needed (1 MiB: ~5x on the 15M plant).
     std::uint64_t chunk_bytes = 64ull << 10;
-    std::string source;                      // free text kept in the manifest ("plant 15M seed 1")
+    std::string source;  // free text kept in the manifest ("plant 15M seed 1")
 };
 
 struct ObjectInfo {

@@ -78,6 +78,10 @@ StatusOr<Schedule> schedule_for(const Store& store, double tolerance, std::uint6
 StatusOr<std::vector<ObjectPairResult>> verify_brute_force(const Store& store, double tolerance,
                                                            const CancelToken* cancel = nullptr);
 
+// The rounding slack of comparisons on the store's coordinates (distance/bounds.hpp), from the
+// largest coordinate magnitude of its objects' boxes.
+double model_slack(const Store& store);
+
 // Reassembles object `object` from its pieces (exact coordinates, original triangle order).
 StatusOr<TriangleMesh> read_object(const Store& store, std::uint32_t object);
 
