@@ -19,6 +19,8 @@ packages=(
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev
   libfcl-dev libbullet-dev
   python3 python3-grpcio python3-protobuf python3-numpy binutils
+  # Service hardening: TLS test certificates, Prometheus metrics, libFuzzer targets (clang).
+  openssl libssl-dev prometheus-cpp-dev clang libclang-rt-14-dev
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }

@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <optional>
@@ -25,7 +26,12 @@ class DaemonProcess {
     // `listening on` line. On failure `ok()` is false and `error()` says why.
     explicit DaemonProcess(std::vector<std::string> extra = {},
                            std::chrono::milliseconds timeout = std::chrono::seconds(10)) {
-        std::vector<std::string> args = {PROXIMAD_PATH, "--listen", "127.0.0.1:0"};
+        // `--listen` in `extra` (a fixed port, to restart a daemon on the same address) replaces
+        // the default free loopback port.
+        std::vector<std::string> args = {PROXIMAD_PATH};
+        if (std::find(extra.begin(), extra.end(), "--listen") == extra.end()) {
+            args.insert(args.end(), {"--listen", "127.0.0.1:0"});
+        }
         args.insert(args.end(), extra.begin(), extra.end());
         int out[2];
         if (pipe2(out, O_CLOEXEC) != 0) {
