@@ -35,6 +35,10 @@ grpc::StatusCode grpc_code(StatusCode code) {
             return grpc::StatusCode::INTERNAL;
         case StatusCode::data_loss:
             return grpc::StatusCode::DATA_LOSS;
+        case StatusCode::unauthenticated:
+            return grpc::StatusCode::UNAUTHENTICATED;
+        case StatusCode::permission_denied:
+            return grpc::StatusCode::PERMISSION_DENIED;
     }
     return grpc::StatusCode::UNKNOWN;
 }

@@ -102,6 +102,10 @@ Status from_grpc(const grpc::Status& status) {
             return {StatusCode::internal, status.error_message()};
         case grpc::StatusCode::DATA_LOSS:
             return {StatusCode::data_loss, status.error_message()};
+        case grpc::StatusCode::UNAUTHENTICATED:
+            return {StatusCode::unauthenticated, status.error_message()};
+        case grpc::StatusCode::PERMISSION_DENIED:
+            return {StatusCode::permission_denied, status.error_message()};
         default:
             break;
     }
@@ -162,6 +166,12 @@ grpc::Status to_grpc(const Status& status) {
             break;
         case StatusCode::data_loss:
             code = grpc::StatusCode::DATA_LOSS;
+            break;
+        case StatusCode::unauthenticated:
+            code = grpc::StatusCode::UNAUTHENTICATED;
+            break;
+        case StatusCode::permission_denied:
+            code = grpc::StatusCode::PERMISSION_DENIED;
             break;
     }
     return {code, status.message()};

@@ -24,6 +24,10 @@ const char* status_code_name(StatusCode code) {
             return "INTERNAL";
         case StatusCode::data_loss:
             return "DATA_LOSS";
+        case StatusCode::unauthenticated:
+            return "UNAUTHENTICATED";
+        case StatusCode::permission_denied:
+            return "PERMISSION_DENIED";
     }
     return "UNKNOWN";
 }

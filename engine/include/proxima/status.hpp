@@ -22,6 +22,8 @@ enum class StatusCode {
     unavailable,          // a backend (GPU context, file system) cannot serve now
     internal,             // a bug: an invariant did not hold
     data_loss,            // stored data is corrupt (a checksum mismatch): reported, never served
+    unauthenticated,      // the caller presented no valid credentials (the daemon's tokens)
+    permission_denied,    // valid credentials that do not grant this (a review room)
 };
 
 const char* status_code_name(StatusCode code);
