@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -20,6 +21,7 @@
 
 #include "proxima/culling/dvd.hpp"
 #include "proxima/gpu/egl_backend.hpp"
+#include "proxima/gpu/failover_backend.hpp"
 
 namespace proxima {
 namespace {
@@ -593,6 +595,257 @@ TEST_F(DvdGpu, DestructionIsClean) {
         expect_identical(cpu, run_ok(*used.value(), in), "second backend, again");
     }
     expect_identical(cpu, run_ok(*m_gpu, in), "shared backend after others were destroyed");
+}
+
+// --- Context loss (EglOptions::lose_context_after_jobs, PROXIMA_EGL_LOSE_CONTEXT_AFTER) and the
+// failover backend. The hook ends a job exactly where a real reset is noticed, so these run the
+// real loss path: the job fails, the context is destroyed, the backend stays lost.
+
+std::shared_ptr<dvd::Backend> egl_losing_after(std::uint64_t jobs) {
+    gpu::EglOptions options;
+    options.lose_context_after_jobs = jobs;
+    auto made = gpu::make_egl_backend(options);
+    EXPECT_TRUE(made.ok()) << made.status().to_string();
+    return made.ok() ? made.value() : nullptr;
+}
+
+// Inputs of both modes and several sizes, with their CPU outputs.
+struct Cases {
+    std::vector<KernelInput> inputs;
+    std::vector<KernelOutput> expected;
+};
+
+Cases make_cases(dvd::Backend& cpu, int count, std::uint32_t seed) {
+    Cases c;
+    for (int i = 0; i < count; ++i) {
+        RandomSpec spec;
+        spec.seed = seed + static_cast<std::uint32_t>(i);
+        spec.mode = i % 2 == 0 ? Mode::inter_object : Mode::intra_object;
+        spec.objects = spec.mode == Mode::intra_object ? 1 : 3;
+        spec.samples = 400 + 150 * static_cast<std::size_t>(i % 5);
+        c.inputs.push_back(random_input(spec));
+        c.expected.push_back(run_ok(cpu, c.inputs.back()));
+    }
+    return c;
+}
+
+TEST_F(DvdGpu, LostContextFailsTheJobAndStaysLost) {
+    const Cases cases = make_cases(*m_cpu, 3, 300);
+    auto losing = egl_losing_after(2);
+    ASSERT_TRUE(losing);
+    EXPECT_EQ(losing->lost_reason(), "");
+    expect_identical(cases.expected[0], run_ok(*losing, cases.inputs[0]), "job 1");
+    expect_identical(cases.expected[1], run_ok(*losing, cases.inputs[1]), "job 2");
+    EXPECT_EQ(losing->lost_reason(), "");
+
+    KernelOutput out;
+    const Status third = losing->run(cases.inputs[2], out);
+    EXPECT_EQ(third.code(), StatusCode::unavailable) << third.to_string();
+    EXPECT_NE(third.message().find("GL context reset (GL_UNKNOWN_CONTEXT_RESET)"),
+              std::string::npos)
+        << third.message();
+    const std::string reason = losing->lost_reason();
+    EXPECT_NE(reason.find("GL_UNKNOWN_CONTEXT_RESET"), std::string::npos) << reason;
+    EXPECT_NE(reason.find("simulated after 2 jobs (EglOptions::lose_context_after_jobs=2)"),
+              std::string::npos)
+        << reason;
+
+    // Lost for good: no job runs again, not even the ones that worked before.
+    for (int i = 0; i < 2; ++i) {
+        const Status again = losing->run(cases.inputs[i], out);
+        EXPECT_EQ(again.code(), StatusCode::unavailable) << again.to_string();
+        EXPECT_NE(again.message().find("GPU context lost earlier: " + reason), std::string::npos)
+            << again.message();
+    }
+    EXPECT_EQ(losing->lost_reason(), reason);
+    // Input errors are still reported as such.
+    KernelInput bad = cases.inputs[0];
+    bad.sample_owner[0] = 1u << 30;
+    EXPECT_EQ(losing->run(bad, out).code(), StatusCode::invalid_argument);
+
+    // The lost backend gave its context back; the display and the suite's backend still work.
+    losing.reset();
+    expect_identical(cases.expected[2], run_ok(*m_gpu, cases.inputs[2]), "other backend");
+}
+
+TEST_F(DvdGpu, LosingAtTheFirstJobAndThroughTheEnvironment) {
+    const Cases cases = make_cases(*m_cpu, 2, 320);
+    auto at_once = egl_losing_after(0);
+    ASSERT_TRUE(at_once);
+    KernelOutput out;
+    EXPECT_EQ(at_once->run(cases.inputs[0], out).code(), StatusCode::unavailable);
+    EXPECT_NE(at_once->lost_reason().find("simulated after 0 jobs"), std::string::npos)
+        << at_once->lost_reason();
+
+    setenv("PROXIMA_EGL_LOSE_CONTEXT_AFTER", "1", 1);
+    auto from_env = gpu::make_egl_backend();
+    unsetenv("PROXIMA_EGL_LOSE_CONTEXT_AFTER");
+    ASSERT_TRUE(from_env.ok()) << from_env.status().to_string();
+    expect_identical(cases.expected[0], run_ok(*from_env.value(), cases.inputs[0]), "env job 1");
+    EXPECT_EQ(from_env.value()->run(cases.inputs[1], out).code(), StatusCode::unavailable);
+    EXPECT_NE(from_env.value()->lost_reason().find("(PROXIMA_EGL_LOSE_CONTEXT_AFTER=1)"),
+              std::string::npos)
+        << from_env.value()->lost_reason();
+
+    for (const char* bad : {"x", "3 jobs", "-1"}) {
+        setenv("PROXIMA_EGL_LOSE_CONTEXT_AFTER", bad, 1);
+        auto refused = gpu::make_egl_backend();
+        unsetenv("PROXIMA_EGL_LOSE_CONTEXT_AFTER");
+        ASSERT_FALSE(refused.ok()) << bad;
+        EXPECT_EQ(refused.status().code(), StatusCode::invalid_argument) << bad;
+    }
+}
+
+TEST_F(DvdGpu, FailoverRunsEveryJobAfterTheLossOnTheCpu) {
+    const Cases cases = make_cases(*m_cpu, 8, 340);
+    std::vector<std::string> events;
+    auto failover = gpu::make_failover_backend(
+        egl_losing_after(3), m_cpu, [&](const std::string& reason) { events.push_back(reason); });
+    EXPECT_TRUE(failover->is_gpu());
+    EXPECT_EQ(failover->name(), m_gpu->name());
+    for (int i = 0; i < 8; ++i) {
+        expect_identical(cases.expected[i], run_ok(*failover, cases.inputs[i]),
+                         "job " + std::to_string(i + 1));
+        const dvd::BackendStats st = failover->stats();
+        EXPECT_EQ(st.gpu_active, i < 3) << "after job " << i + 1;
+        EXPECT_EQ(st.gpu_jobs, static_cast<std::uint64_t>(std::min(i + 1, 3)));
+        EXPECT_EQ(st.cpu_jobs, static_cast<std::uint64_t>(std::max(i + 1 - 3, 0)));
+    }
+    const dvd::BackendStats st = failover->stats();
+    EXPECT_FALSE(st.gpu_active);
+    EXPECT_NE(st.fallback_reason.find("GL context reset (GL_UNKNOWN_CONTEXT_RESET)"),
+              std::string::npos)
+        << st.fallback_reason;
+    EXPECT_GT(st.gpu_seconds, 0.0);
+    EXPECT_GT(st.cpu_seconds, 0.0);
+    ASSERT_EQ(events.size(), 1u);  // logged once, with the stats' reason
+    EXPECT_EQ(events[0], st.fallback_reason);
+    EXPECT_FALSE(failover->is_gpu());
+    EXPECT_EQ(failover->name(), "cpu (gpu lost: " + st.fallback_reason + ")");
+
+    // A malformed input is refused as before and counts nowhere.
+    KernelInput bad = cases.inputs[0];
+    bad.bucket_offsets.pop_back();
+    KernelOutput out;
+    EXPECT_EQ(failover->run(bad, out).code(), StatusCode::invalid_argument);
+    EXPECT_EQ(failover->stats().cpu_jobs, st.cpu_jobs);
+}
+
+TEST_F(DvdGpu, ConcurrentJobsAcrossTheLossAllMatchTheCpu) {
+    constexpr int THREADS = 4;
+    constexpr int RUNS = 8;
+    constexpr std::uint64_t LOSE_AFTER = 7;
+    const Cases cases = make_cases(*m_cpu, THREADS, 360);
+    std::atomic<int> events{0};
+    auto failover = gpu::make_failover_backend(egl_losing_after(LOSE_AFTER), m_cpu,
+                                               [&](const std::string&) { ++events; });
+    std::vector<std::vector<KernelOutput>> got(THREADS);
+    std::vector<std::vector<Status>> status(THREADS);
+    std::vector<std::thread> threads;
+    for (int i = 0; i < THREADS; ++i) {
+        threads.emplace_back([&, i] {
+            for (int r = 0; r < RUNS; ++r) {
+                KernelOutput out;
+                status[i].push_back(failover->run(cases.inputs[(i + r) % THREADS], out));
+                got[i].push_back(std::move(out));
+            }
+        });
+    }
+    for (auto& t : threads) {
+        t.join();
+    }
+    for (int i = 0; i < THREADS; ++i) {
+        for (int r = 0; r < RUNS; ++r) {
+            ASSERT_TRUE(status[i][r].ok()) << status[i][r].to_string();
+            expect_identical(cases.expected[(i + r) % THREADS], got[i][r],
+                             "thread " + std::to_string(i) + " run " + std::to_string(r));
+        }
+    }
+    // The context thread runs jobs one at a time, so exactly LOSE_AFTER reached the GPU in time;
+    // the others (queued behind the lost one, or posted after) ran on the CPU.
+    const dvd::BackendStats st = failover->stats();
+    EXPECT_FALSE(st.gpu_active);
+    EXPECT_EQ(st.gpu_jobs, LOSE_AFTER);
+    EXPECT_EQ(st.cpu_jobs, THREADS * RUNS - LOSE_AFTER);
+    EXPECT_EQ(events.load(), 1);
+}
+
+// The failover policy on its own, with a scripted "GPU" (the CPU kernel behind a switch), so it
+// is tested on machines without EGL too.
+class ScriptedGpu final : public dvd::Backend {
+  public:
+    std::string name() const override { return "gpu (scripted)"; }
+    bool is_gpu() const override { return true; }
+    Status run(const KernelInput& input, KernelOutput& output) override {
+        if (Status s = dvd::validate(input); !s.ok()) {
+            return s;
+        }
+        ++m_calls;
+        if (m_lost) {
+            return {StatusCode::unavailable, "lost"};
+        }
+        if (m_decline_next) {
+            m_decline_next = false;
+            return {StatusCode::resource_exhausted, "over a GPU limit"};
+        }
+        if (m_lose_next) {
+            m_lost = true;
+            return {StatusCode::internal, "GPU kernel: dispatching the kernel failed"};
+        }
+        return m_cpu->run(input, output);
+    }
+    std::string lost_reason() const override { return m_lost ? "device reset (scripted)" : ""; }
+
+    std::shared_ptr<dvd::Backend> m_cpu = dvd::make_cpu_backend();
+    bool m_decline_next = false;
+    bool m_lose_next = false;
+    bool m_lost = false;
+    int m_calls = 0;
+};
+
+TEST(DvdFailover, DeclinedJobsRunOnTheCpuAndALossSwitchesForGood) {
+    auto cpu = dvd::make_cpu_backend();
+    RandomSpec spec;
+    spec.seed = 380;
+    spec.samples = 500;
+    const KernelInput in = random_input(spec);
+    const KernelOutput expected = run_ok(*cpu, in);
+    auto scripted = std::make_shared<ScriptedGpu>();
+    int events = 0;
+    auto failover =
+        gpu::make_failover_backend(scripted, cpu, [&](const std::string&) { ++events; });
+    EXPECT_EQ(failover->name(), "gpu (scripted)");
+
+    expect_identical(expected, run_ok(*failover, in), "on the GPU");
+    scripted->m_decline_next = true;  // one job refused, the GPU still working
+    expect_identical(expected, run_ok(*failover, in), "declined");
+    dvd::BackendStats st = failover->stats();
+    EXPECT_TRUE(st.gpu_active);
+    EXPECT_EQ(st.fallback_reason, "");
+    EXPECT_EQ(st.gpu_jobs, 1u);
+    EXPECT_EQ(st.cpu_jobs, 1u);
+    expect_identical(expected, run_ok(*failover, in), "on the GPU again");
+    EXPECT_EQ(scripted->m_calls, 3);
+    EXPECT_EQ(events, 0);
+
+    scripted->m_lose_next = true;
+    expect_identical(expected, run_ok(*failover, in), "the job that lost the GPU");
+    expect_identical(expected, run_ok(*failover, in), "after the loss");
+    st = failover->stats();
+    EXPECT_FALSE(st.gpu_active);
+    EXPECT_EQ(st.fallback_reason, "device reset (scripted)");
+    EXPECT_EQ(st.gpu_jobs, 2u);
+    EXPECT_EQ(st.cpu_jobs, 3u);
+    EXPECT_EQ(scripted->m_calls, 4);  // the job after the loss never went to the GPU
+    EXPECT_EQ(events, 1);
+    EXPECT_EQ(failover->name(), "cpu (gpu lost: device reset (scripted))");
+    EXPECT_FALSE(failover->is_gpu());
+
+    KernelInput bad = in;
+    bad.sample_points.pop_back();
+    KernelOutput out;
+    EXPECT_EQ(failover->run(bad, out).code(), StatusCode::invalid_argument);
+    EXPECT_EQ(failover->stats().cpu_jobs, 3u);
 }
 
 // Forced failure and the environment switch: `unavailable` with the reason, no context.

@@ -20,6 +20,13 @@
 // packs its input on the caller's thread, posts the GPU part and waits for it. The destructor
 // closes the queue, lets the jobs already queued finish, deletes the GL objects, destroys the
 // context on that thread and joins it.
+//
+// Context loss: after every job the context thread checks the reset status and that the context
+// is still current (EglContext::lost_reason), and the job's GL error flags. Any failure there
+// fails the job, and the context is destroyed at once: after a reset, or a GL error in the
+// middle of a job, its state is undefined, and a backend that kept using it could return wrong
+// distances the culler would trust. The thread then stays up, failing every job with the reason,
+// until the backend is destroyed; the failover backend has run them on the CPU since the loss.
 
 #include "proxima/gpu/egl_backend.hpp"
 
@@ -27,6 +34,8 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <cerrno>
 #include <condition_variable>
 #include <cstdint>
 #include <cstdlib>
@@ -36,6 +45,7 @@
 #include <future>
 #include <mutex>
 #include <new>
+#include <optional>
 #include <thread>
 
 #include "gpu/dvd_shader.hpp"
@@ -135,8 +145,13 @@ class JobQueue {
 
 class EglDvdBackend final : public dvd::Backend {
   public:
-    explicit EglDvdBackend(std::size_t max_dispatch_samples)
-        : m_requested_chunk(max_dispatch_samples) {}
+    // `lose_after`: the test hook of EglOptions::lose_context_after_jobs, `lose_after_source`
+    // how it was set (for the reason).
+    EglDvdBackend(std::size_t max_dispatch_samples, std::optional<std::uint64_t> lose_after,
+                  std::string lose_after_source)
+        : m_requested_chunk(max_dispatch_samples),
+          m_lose_after(lose_after),
+          m_lose_after_source(std::move(lose_after_source)) {}
 
     // Starts the context thread and waits until the context and the kernel are ready.
     Status start() {
@@ -162,8 +177,19 @@ class EglDvdBackend final : public dvd::Backend {
     std::string name() const override { return m_name; }
     bool is_gpu() const override { return true; }
 
+    std::string lost_reason() const override {
+        std::lock_guard lock(m_lost_mutex);
+        return m_lost_reason;
+    }
+
     Status run(const dvd::KernelInput& input, dvd::KernelOutput& output) override {
         if (Status s = dvd::validate(input); !s.ok()) {
+            return s;
+        }
+        if (m_lost.load(std::memory_order_acquire)) {
+            return lost_status();
+        }
+        if (Status s = check_block_limits(input); !s.ok()) {
             return s;
         }
         // CPU-side preparation on the caller's thread, so that callers overlap it.
@@ -185,10 +211,84 @@ class EglDvdBackend final : public dvd::Backend {
                           input.sample_points[3 * i + 2], input.sample_owner[i],
                           input.sample_bucket[i]};
         }
-        return call([&] { return execute(input, samples, output); });
+        return call([&] { return run_job(input, samples, output); });
     }
 
   private:
+    Status lost_status() const { return unavailable("GPU context lost earlier: " + lost_reason()); }
+
+    // The arrays every invocation may index whole must each fit one storage block. Checked on
+    // the caller's thread, before any GL call: a job over the limit is refused, and the context
+    // is untouched (lost_reason() stays ""), so the GPU keeps serving smaller jobs. The limits
+    // are written by the context thread before start() returns and constant after.
+    Status check_block_limits(const dvd::KernelInput& in) const {
+        const std::array<std::size_t, 5> whole_bytes = whole_array_bytes(in);
+        for (GLuint b = 0; b < whole_bytes.size(); ++b) {
+            if (whole_bytes[b] > static_cast<std::size_t>(m_max_block_bytes)) {
+                return {StatusCode::resource_exhausted,
+                        "GPU kernel: " + std::string(binding_name(b)) + " takes " +
+                            std::to_string(whole_bytes[b]) +
+                            " bytes, more than GL_MAX_SHADER_STORAGE_BLOCK_SIZE (" +
+                            std::to_string(m_max_block_bytes) + ") on " + m_renderer +
+                            "; use the CPU backend or a coarser bucket grid"};
+            }
+        }
+        return Status::ok_status();
+    }
+
+    static std::array<std::size_t, 5> whole_array_bytes(const dvd::KernelInput& in) {
+        return {in.triangle_vertices.size() * sizeof(float),
+                in.triangle_indices.size() * sizeof(std::uint32_t),
+                in.triangle_object.size() * sizeof(std::uint32_t),
+                in.bucket_offsets.size() * sizeof(std::uint32_t),
+                in.bucket_triangles.size() * sizeof(std::uint32_t)};
+    }
+
+    // On the context thread: one job, and the checks that say whether the context survived it.
+    Status run_job(const dvd::KernelInput& in, const std::vector<PackedSample>& samples,
+                   dvd::KernelOutput& out) {
+        if (!m_context) {  // queued before the loss
+            return lost_status();
+        }
+        if (std::string before = m_context->lost_reason(); !before.empty()) {
+            lose(before);
+            return unavailable("GPU kernel: " + before);
+        }
+        const Status s = execute(in, samples, out);
+        // The test hook ends the job exactly where a real reset would be noticed.
+        const bool simulate = m_lose_after && m_jobs_done >= *m_lose_after;
+        std::string reason =
+            m_context->lost_reason(simulate ? GL_UNKNOWN_CONTEXT_RESET : GL_NO_ERROR);
+        if (!reason.empty()) {
+            if (simulate) {
+                reason += ", simulated after " + std::to_string(m_jobs_done) + " jobs (" +
+                          m_lose_after_source + ")";
+            }
+            lose(reason);
+            return unavailable("GPU kernel: " + reason);
+        }
+        if (!s.ok()) {
+            lose(s.message() + " on " + m_renderer);
+            return s;
+        }
+        ++m_jobs_done;
+        return Status::ok_status();
+    }
+
+    // On the context thread: the context is gone or undefined. Deletes what it can (GL calls on
+    // a lost context do nothing) and destroys the context; later jobs fail with `reason`.
+    void lose(const std::string& reason) {
+        {
+            std::lock_guard lock(m_lost_mutex);
+            m_lost_reason = reason;
+        }
+        m_lost.store(true, std::memory_order_release);
+        release_gl();
+        m_program = 0;
+        m_buffers = {};
+        m_capacity = {};
+    }
+
     // Posts `job` to the context thread and waits for its status.
     Status call(const std::function<Status()>& job) {
         auto done = std::make_shared<std::promise<Status>>();
@@ -276,7 +376,8 @@ class EglDvdBackend final : public dvd::Backend {
         if (const GLenum e = gl.glGetError(); e != GL_NO_ERROR) {
             return unavailable("OpenGL: glGenBuffers failed (" + gl_error_name(e) + ")" + where);
         }
-        m_name = "gpu (" + m_context->renderer() + ")";
+        m_renderer = m_context->renderer();
+        m_name = "gpu (" + m_renderer + ")";
         return Status::ok_status();
     }
 
@@ -337,7 +438,8 @@ class EglDvdBackend final : public dvd::Backend {
         m_context.reset();
     }
 
-    // Status for a GL error raised during `stage`, or ok. Clears the error flags.
+    // Status for a GL error raised during `stage`, or ok. Clears the error flags. run_job then
+    // destroys the context: a GL error in the middle of a job leaves it undefined.
     Status check_gl(const char* stage) {
         const GlApi& gl = m_context->gl();
         GLenum first = GL_NO_ERROR;
@@ -401,25 +503,10 @@ class EglDvdBackend final : public dvd::Backend {
     Status execute(const dvd::KernelInput& in, const std::vector<PackedSample>& samples,
                    dvd::KernelOutput& out) {
         const GlApi& gl = m_context->gl();
-        (void)check_gl("an earlier call");  // never blame this run for stale flags
-
-        // The arrays every invocation may index whole must each fit one storage block.
-        const std::array<std::size_t, 5> whole_bytes = {
-            in.triangle_vertices.size() * sizeof(float),
-            in.triangle_indices.size() * sizeof(std::uint32_t),
-            in.triangle_object.size() * sizeof(std::uint32_t),
-            in.bucket_offsets.size() * sizeof(std::uint32_t),
-            in.bucket_triangles.size() * sizeof(std::uint32_t)};
-        for (GLuint b = 0; b < whole_bytes.size(); ++b) {
-            if (whole_bytes[b] > static_cast<std::size_t>(m_max_block_bytes)) {
-                return {StatusCode::resource_exhausted,
-                        "GPU kernel: " + std::string(binding_name(b)) + " takes " +
-                            std::to_string(whole_bytes[b]) +
-                            " bytes, more than GL_MAX_SHADER_STORAGE_BLOCK_SIZE (" +
-                            std::to_string(m_max_block_bytes) + ") on " + m_context->renderer() +
-                            "; use the CPU backend or a coarser bucket grid"};
-            }
-        }
+        // Every GL error so far ended its job and the context, so none is stale; the check
+        // only keeps a driver's stray flag (e.g. from the start-up queries) off this job.
+        (void)check_gl("an earlier call");
+        const std::array<std::size_t, 5> whole_bytes = whole_array_bytes(in);
 
         const std::size_t n = samples.size();
         upload(TRIANGLE_VERTICES, in.triangle_vertices.data(), in.triangle_vertices.size());
@@ -474,9 +561,19 @@ class EglDvdBackend final : public dvd::Backend {
     }
 
     std::size_t m_requested_chunk = 0;  // 0: as the limits allow
+    const std::optional<std::uint64_t> m_lose_after;
+    const std::string m_lose_after_source;
     std::thread m_thread;
     JobQueue m_queue;
-    std::string m_name;  // written by the context thread before start() returns; const after
+    // Written by the context thread before start() returns; const after.
+    std::string m_name;
+    std::string m_renderer;
+    GLint64 m_max_block_bytes = 0;
+
+    // Set once, by the context thread, when the context is lost.
+    std::atomic<bool> m_lost{false};
+    mutable std::mutex m_lost_mutex;
+    std::string m_lost_reason;
 
     // Owned by the context thread.
     std::unique_ptr<EglContext> m_context;
@@ -486,8 +583,8 @@ class EglDvdBackend final : public dvd::Backend {
     GLint m_loc_radius = -1;
     std::array<GLuint, BINDING_COUNT> m_buffers{};
     std::array<std::size_t, BINDING_COUNT> m_capacity{};
-    GLint64 m_max_block_bytes = 0;
     std::size_t m_chunk_samples = 0;
+    std::uint64_t m_jobs_done = 0;  // jobs the GPU answered
 };
 
 bool env_is_set(const char* name) {
@@ -511,8 +608,27 @@ StatusOr<std::shared_ptr<dvd::Backend>> make_egl_backend(const EglOptions& optio
     if (const char* v = std::getenv("PROXIMA_EGL_MAX_DISPATCH_SAMPLES"); v != nullptr) {
         max_dispatch = static_cast<std::size_t>(std::strtoull(v, nullptr, 10));
     }
+    std::optional<std::uint64_t> lose_after = options.lose_context_after_jobs;
+    std::string lose_after_source;
+    if (lose_after) {
+        lose_after_source = "EglOptions::lose_context_after_jobs=" + std::to_string(*lose_after);
+    } else if (const char* v = std::getenv("PROXIMA_EGL_LOSE_CONTEXT_AFTER");
+               v != nullptr && *v != '\0') {
+        // A typo here must not pass for "never": the daemon would then test nothing.
+        char* end = nullptr;
+        errno = 0;
+        const unsigned long long n = std::strtoull(v, &end, 10);
+        if (*end != '\0' || errno != 0 || *v == '-') {
+            return Status(
+                StatusCode::invalid_argument,
+                "PROXIMA_EGL_LOSE_CONTEXT_AFTER='" + std::string(v) + "' is not a job count");
+        }
+        lose_after = n;
+        lose_after_source = "PROXIMA_EGL_LOSE_CONTEXT_AFTER=" + std::to_string(n);
+    }
     try {
-        auto backend = std::make_shared<EglDvdBackend>(max_dispatch);
+        auto backend =
+            std::make_shared<EglDvdBackend>(max_dispatch, lose_after, std::move(lose_after_source));
         if (Status s = backend->start(); !s.ok()) {
             return s;
         }

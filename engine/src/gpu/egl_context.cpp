@@ -5,6 +5,7 @@
 #include <dlfcn.h>
 #include <link.h>
 
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <mutex>
@@ -173,14 +174,36 @@ struct EglContextFactory {
         }
         // 4.3 is where compute shaders and shader storage buffers became core; drivers return the
         // highest compatible core version (Mesa llvmpipe: 4.5).
-        const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION,
-                                          4,
-                                          EGL_CONTEXT_MINOR_VERSION,
-                                          3,
-                                          EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                                          EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-                                          EGL_NONE};
-        EGLContext context = eglCreateContext(display, config, EGL_NO_CONTEXT, context_attribs);
+        std::vector<EGLint> context_attribs = {
+            EGL_CONTEXT_MAJOR_VERSION,       4,
+            EGL_CONTEXT_MINOR_VERSION,       3,
+            EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT};
+        // Ask for reset notification first, so that a GPU reset is reported by
+        // glGetGraphicsResetStatus (and the backend falls back to the CPU) rather than left to
+        // the driver's default (no notification: calls may silently do nothing). EGL 1.5 and
+        // EGL_KHR_create_context spell it for desktop OpenGL; EGL_EXT_create_context_robustness
+        // has its own attribute. A driver without robustness refuses the attribute: then a plain
+        // context, whose loss still shows as GL_CONTEXT_LOST errors or EGL_CONTEXT_LOST.
+        const char* display_extensions = eglQueryString(display, EGL_EXTENSIONS);
+        const char* version = eglQueryString(display, EGL_VERSION);
+        const bool egl15 = version != nullptr && std::strncmp(version, "1.", 2) == 0 &&
+                           std::atoi(version + 2) >= 5;
+        EGLint robust_attribute = EGL_NONE;
+        if (egl15 || has_extension(display_extensions, "EGL_KHR_create_context")) {
+            robust_attribute = EGL_CONTEXT_OPENGL_RESET_NOTIFICATION_STRATEGY;
+        } else if (has_extension(display_extensions, "EGL_EXT_create_context_robustness")) {
+            robust_attribute = EGL_CONTEXT_OPENGL_RESET_NOTIFICATION_STRATEGY_EXT;
+        }
+        EGLContext context = EGL_NO_CONTEXT;
+        if (robust_attribute != EGL_NONE) {
+            std::vector<EGLint> robust = context_attribs;
+            robust.insert(robust.end(), {robust_attribute, EGL_LOSE_CONTEXT_ON_RESET, EGL_NONE});
+            context = eglCreateContext(display, config, EGL_NO_CONTEXT, robust.data());
+        }
+        if (context == EGL_NO_CONTEXT) {
+            context_attribs.push_back(EGL_NONE);
+            context = eglCreateContext(display, config, EGL_NO_CONTEXT, context_attribs.data());
+        }
         if (context == EGL_NO_CONTEXT) {
             return fail("eglCreateContext for OpenGL 4.3 core failed");
         }
@@ -217,6 +240,25 @@ struct EglContextFactory {
                                " (" + result->m_renderer + ") on the " + platform +
                                " platform: compute shaders need 4.3");
         }
+        // Core since 4.5; before, GL_KHR_robustness / GL_ARB_robustness name it with a suffix
+        // (through GLVND eglGetProcAddress may return a stub for a missing one: it returns
+        // GL_NO_ERROR, which is what a context without resets says anyway).
+        for (const char* name : {"glGetGraphicsResetStatus", "glGetGraphicsResetStatusKHR",
+                                 "glGetGraphicsResetStatusARB"}) {
+            if (std::strcmp(name, "glGetGraphicsResetStatus") == 0 && major == 4 && minor < 5) {
+                continue;
+            }
+            result->m_get_reset_status =
+                reinterpret_cast<PFNGLGETGRAPHICSRESETSTATUSPROC>(eglGetProcAddress(name));
+            if (result->m_get_reset_status != nullptr) {
+                break;
+            }
+        }
+        GLint strategy = 0;
+        gl.glGetIntegerv(GL_RESET_NOTIFICATION_STRATEGY, &strategy);
+        result->m_reset_notification = result->m_get_reset_status != nullptr &&
+                                       static_cast<GLenum>(strategy) == GL_LOSE_CONTEXT_ON_RESET;
+        (void)gl.glGetError();  // a driver without the query raises GL_INVALID_ENUM: not an error
         return result;
     }
 
@@ -304,6 +346,27 @@ EglContext::~EglContext() {
     release_display(display);
 }
 
+std::string EglContext::lost_reason(GLenum simulated_reset) const {
+    const std::string where = " on " + m_renderer + " (" + m_platform + " platform)";
+    // Our context is made current once, at creation, and stays current on this thread; if it is
+    // not current any more, making it current again says whether EGL still knows it (a power
+    // event or a device reset reports EGL_CONTEXT_LOST there).
+    auto display = static_cast<EGLDisplay>(m_display);
+    auto context = static_cast<EGLContext>(m_context);
+    if (eglGetCurrentContext() != context &&
+        eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context) != EGL_TRUE) {
+        return "eglMakeCurrent failed (" + last_egl_error() + ")" + where;
+    }
+    GLenum reset = simulated_reset;
+    if (reset == GL_NO_ERROR && m_get_reset_status != nullptr) {
+        reset = m_get_reset_status();
+    }
+    if (reset == GL_NO_ERROR) {
+        return {};
+    }
+    return "GL context reset (" + gl_error_name(reset) + ")" + where;
+}
+
 Status load_gl_api(GlApi& api) {
 #define PROXIMA_GL_LOAD(type, name)                                                  \
     api.name = reinterpret_cast<type>(eglGetProcAddress(#name));                     \
@@ -331,6 +394,13 @@ std::string gl_error_name(GLenum error) {
             return "GL_OUT_OF_MEMORY";
         case GL_CONTEXT_LOST:
             return "GL_CONTEXT_LOST";
+        // glGetGraphicsResetStatus
+        case GL_GUILTY_CONTEXT_RESET:
+            return "GL_GUILTY_CONTEXT_RESET";
+        case GL_INNOCENT_CONTEXT_RESET:
+            return "GL_INNOCENT_CONTEXT_RESET";
+        case GL_UNKNOWN_CONTEXT_RESET:
+            return "GL_UNKNOWN_CONTEXT_RESET";
         default:
             return "GL error " + std::to_string(error);
     }

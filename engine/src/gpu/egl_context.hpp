@@ -10,6 +10,12 @@
 //
 // An EglContext is not thread-safe: create, use and destroy it on one thread (the backend's
 // context thread), where it stays current for its whole life.
+//
+// Context loss: a GPU reset (a hung or killed job, a driver update, a suspended device) leaves
+// the context unusable. It is created robust where the driver allows (reset notification
+// LOSE_CONTEXT_ON_RESET: EGL 1.5 / EGL_KHR_create_context, or EGL_EXT_create_context_robustness),
+// so that glGetGraphicsResetStatus reports the reset instead of the driver misbehaving silently;
+// lost_reason() checks that and whether the context is still current (EGL_CONTEXT_LOST).
 
 #include <memory>
 #include <string>
@@ -34,6 +40,14 @@ class EglContext {
     const std::string& version() const { return m_version; }    // GL_VERSION
     const std::string& platform() const { return m_platform; }  // "surfaceless" or "device 0"
     bool is_software() const { return m_software; }
+    // True when the context reports resets (LOSE_CONTEXT_ON_RESET granted).
+    bool reset_notification() const { return m_reset_notification; }
+
+    // "" while the context works; otherwise what broke, e.g. "GL context reset
+    // (GL_GUILTY_CONTEXT_RESET) on llvmpipe (...)" or "eglMakeCurrent failed (EGL_CONTEXT_LOST)
+    // ...". `simulated_reset` (a GL reset status, for the backend's test hook) is reported as if
+    // the driver had returned it. Once non-empty the context must be destroyed, never reused.
+    std::string lost_reason(GLenum simulated_reset = GL_NO_ERROR) const;
 
   private:
     EglContext() = default;
@@ -45,6 +59,9 @@ class EglContext {
     std::string m_version;
     std::string m_platform;
     bool m_software = false;
+    bool m_reset_notification = false;
+    // glGetGraphicsResetStatus (GL 4.5) or its KHR/ARB robustness name; null without either.
+    PFNGLGETGRAPHICSRESETSTATUSPROC m_get_reset_status = nullptr;
 
     friend struct EglContextFactory;
 };

@@ -57,7 +57,8 @@ struct GlApi {
 // on some drivers, so it is called after eglMakeCurrent.
 Status load_gl_api(GlApi& api);
 
-// "GL_OUT_OF_MEMORY" etc. for messages.
+// "GL_OUT_OF_MEMORY", "GL_GUILTY_CONTEXT_RESET" etc. (glGetError and glGetGraphicsResetStatus
+// values) for messages.
 std::string gl_error_name(GLenum error);
 
 }  // namespace proxima::gpu

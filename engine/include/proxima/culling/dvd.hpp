@@ -105,6 +105,21 @@ class Backend {
     virtual bool is_gpu() const = 0;
     // Thread-safe: a GPU backend serializes work on the one thread that owns its context.
     virtual Status run(const KernelInput& input, KernelOutput& output) = 0;
+    // "" while the backend can run jobs. Once it never can again (a GPU whose context was lost,
+    // or left in an undefined state by a failed job), why; every later run() then fails. A run()
+    // that fails while this stays "" refused that one job only (e.g. an input over a GPU limit).
+    virtual std::string lost_reason() const { return {}; }
+};
+
+// What a backend that falls back from the GPU to the CPU (gpu::FailoverBackend) has done, for
+// server info and metrics.
+struct BackendStats {
+    bool gpu_active = false;      // the GPU runs the jobs (false after a loss, or without a GPU)
+    std::string fallback_reason;  // why the GPU does not ("" while it does)
+    std::uint64_t gpu_jobs = 0;   // jobs the GPU answered
+    std::uint64_t cpu_jobs = 0;   // jobs the CPU kernel ran in the GPU's place
+    double gpu_seconds = 0.0;     // time in the GPU backend's run(), failed attempts included
+    double cpu_seconds = 0.0;     // time in the CPU kernel for those jobs
 };
 
 // The parallel CPU backend (oneTBB).
