@@ -735,6 +735,17 @@ RemoteServerInfo decode_server_info(const pb::ServerInfo& info) {
     out.max_triangles_per_scene = l.max_triangles_per_scene();
     out.max_message_bytes = l.max_message_bytes();
     out.max_frames_in_flight = l.max_frames_in_flight();
+    out.principal = info.principal();
+    const auto& q = info.quotas();
+    out.quota_max_scenes = q.max_scenes();
+    out.quota_max_objects = q.max_objects();
+    out.quota_max_triangles = q.max_triangles();
+    out.quota_max_bytes_held = q.max_bytes_held();
+    out.quota_max_bytes_in_flight = q.max_bytes_in_flight();
+    out.quota_max_frames_per_second = q.max_frames_per_second();
+    out.quota_max_streams = q.max_streams();
+    out.gpu_active = info.gpu_active();
+    out.gpu_fallback_reason = info.gpu_fallback_reason();
     return out;
 }
 

@@ -1,10 +1,21 @@
 #include "client/proxima_client.hpp"
 
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
+#include <filesystem>
+#include <fstream>
 #include <mutex>
+#include <random>
+#include <sstream>
+#include <string_view>
 #include <thread>
+#include <unordered_map>
 #include <utility>
 
 #include <grpcpp/grpcpp.h>
@@ -28,18 +39,318 @@ std::chrono::system_clock::time_point deadline_after(std::chrono::milliseconds m
     return std::chrono::system_clock::now() + ms;
 }
 
+std::string milliseconds_text(std::chrono::milliseconds ms) {
+    return std::to_string(ms.count()) + " ms";
+}
+
+// gRPC sends ASCII header values only (a newline would end the header): a token with anything
+// else cannot work, and saying so beats a baffling INTERNAL from the transport.
+Status check_token(const std::string& token, const std::string& source) {
+    for (unsigned char c : token) {
+        if (c < 0x20 || c > 0x7e) {
+            return invalid_argument(source +
+                                    " holds a character that cannot travel in an "
+                                    "authorization header (printable ASCII only)");
+        }
+    }
+    return {};
+}
+
+bool holds_pem(const std::string& text, const std::string& label_end) {
+    const auto begin = text.find("-----BEGIN ");
+    return begin != std::string::npos && text.find(label_end, begin) != std::string::npos;
+}
+
+Status check_tls(const TlsOptions& tls) {
+    if (!tls.root_ca_pem.empty() && !holds_pem(tls.root_ca_pem, "CERTIFICATE-----")) {
+        return invalid_argument("TLS root CA: no PEM certificate (-----BEGIN CERTIFICATE-----)");
+    }
+    if (tls.client_cert_pem.empty() != tls.client_key_pem.empty()) {
+        return invalid_argument(
+            tls.client_cert_pem.empty()
+                ? "TLS: a client key without a client certificate (mutual TLS needs both)"
+                : "TLS: a client certificate without its private key (mutual TLS needs both)");
+    }
+    if (!tls.client_cert_pem.empty() && !holds_pem(tls.client_cert_pem, "CERTIFICATE-----")) {
+        return invalid_argument("TLS client certificate: no PEM certificate");
+    }
+    if (!tls.client_key_pem.empty() && !holds_pem(tls.client_key_pem, "PRIVATE KEY-----")) {
+        return invalid_argument(
+            "TLS client key: no PEM private key (-----BEGIN ... PRIVATE "
+            "KEY-----)");
+    }
+    return {};
+}
+
+StatusOr<std::string> read_text_file(const std::string& path, const std::string& what) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) {
+        return not_found(what + " '" + path + "' does not exist");
+    }
+    if (std::filesystem::is_directory(path, ec)) {
+        return invalid_argument(what + " '" + path + "' is a directory, not a file");
+    }
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        return Status(StatusCode::failed_precondition,
+                      what + " '" + path + "' cannot be read: " + std::strerror(errno));
+    }
+    std::ostringstream text;
+    text << in.rdbuf();
+    if (in.bad()) {
+        return Status(StatusCode::failed_precondition, what + " '" + path + "': read error");
+    }
+    return text.str();
+}
+
+// Names match the proto's methods so that retry reports read like the daemon's logs.
+enum class Retry {
+    idempotent,   // safe to repeat whatever happened: every UNAVAILABLE is retried
+    unsent_only,  // repeats would change state: retried only when the request never went out
+};
+
 }  // namespace
+
+namespace {
+
+// from_grpc's form for codes the engine cannot name: internal, "gRPC NAME: message".
+bool split_grpc_prefix(const Status& status, std::string* name, std::string* rest) {
+    constexpr std::string_view PREFIX = "gRPC ";
+    const auto& m = status.message();
+    if (status.code() != StatusCode::internal || m.rfind(PREFIX, 0) != 0) {
+        return false;
+    }
+    const auto colon = m.find(": ", PREFIX.size());
+    if (colon == std::string::npos) {
+        return false;
+    }
+    const auto candidate = m.substr(PREFIX.size(), colon - PREFIX.size());
+    if (candidate.empty() ||
+        candidate.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZ_") != std::string::npos) {
+        return false;
+    }
+    *name = candidate;
+    *rest = m.substr(colon + 2);
+    return true;
+}
+
+}  // namespace
+
+std::string grpc_code_name(const Status& status) {
+    std::string name;
+    std::string rest;
+    if (split_grpc_prefix(status, &name, &rest)) {
+        return name;
+    }
+    return status_code_name(status.code());
+}
+
+std::string describe_status(const Status& status) {
+    std::string name;
+    std::string rest;
+    if (split_grpc_prefix(status, &name, &rest)) {
+        return name + ": " + rest;
+    }
+    return status.to_string();
+}
+
+StatusOr<TlsOptions> load_tls_files(const std::string& root_ca_file,
+                                    const std::string& client_cert_file,
+                                    const std::string& client_key_file) {
+    TlsOptions tls;
+    struct Part {
+        const std::string& path;
+        std::string* out;
+        const char* what;
+    };
+    for (const Part& part :
+         {Part{root_ca_file, &tls.root_ca_pem, "TLS root CA file"},
+          Part{client_cert_file, &tls.client_cert_pem, "TLS client certificate file"},
+          Part{client_key_file, &tls.client_key_pem, "TLS client key file"}}) {
+        if (part.path.empty()) {
+            continue;
+        }
+        auto text = read_text_file(part.path, part.what);
+        if (!text.ok()) {
+            return text.status();
+        }
+        *part.out = std::move(text).value();
+    }
+    // The same checks as connect(), but naming the files.
+    if (!root_ca_file.empty() && !holds_pem(tls.root_ca_pem, "CERTIFICATE-----")) {
+        return invalid_argument("TLS root CA file '" + root_ca_file +
+                                "' holds no PEM certificate (-----BEGIN CERTIFICATE-----)");
+    }
+    if (!client_cert_file.empty() && !holds_pem(tls.client_cert_pem, "CERTIFICATE-----")) {
+        return invalid_argument("TLS client certificate file '" + client_cert_file +
+                                "' holds no PEM certificate (-----BEGIN CERTIFICATE-----)");
+    }
+    if (!client_key_file.empty() && !holds_pem(tls.client_key_pem, "PRIVATE KEY-----")) {
+        return invalid_argument("TLS client key file '" + client_key_file +
+                                "' holds no PEM private key (-----BEGIN ... PRIVATE KEY-----)");
+    }
+    if (client_cert_file.empty() != client_key_file.empty()) {
+        return invalid_argument(client_cert_file.empty()
+                                    ? "a TLS client key file needs its certificate file too"
+                                    : "a TLS client certificate file needs its key file too");
+    }
+    return tls;
+}
+
+StatusOr<std::string> read_token_file(const std::string& path, std::string* warning) {
+    auto text = read_text_file(path, "token file");
+    if (!text.ok()) {
+        return text.status();
+    }
+    std::string line = text->substr(0, text->find('\n'));
+    const auto first = line.find_first_not_of(" \t\r\f\v");
+    if (first == std::string::npos) {
+        return invalid_argument("token file '" + path + "': the first line is empty");
+    }
+    line = line.substr(first, line.find_last_not_of(" \t\r\f\v") - first + 1);
+    if (auto st = check_token(line, "token file '" + path + "'"); !st.ok()) {
+        return st;
+    }
+    struct stat info {};
+    if (warning && ::stat(path.c_str(), &info) == 0 && (info.st_mode & S_IROTH) != 0) {
+        char mode[8];
+        std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(info.st_mode & 07777));
+        *warning = "token file '" + path + "' is readable by every user (mode " + mode +
+                   "); the token is a password: chmod 600 it";
+    }
+    return line;
+}
 
 struct Client::Impl {
     std::string address;
     ConnectOptions options;
     std::shared_ptr<grpc::Channel> channel;
     std::unique_ptr<pb::Proximity::Stub> stub;
+    std::mutex rng_mu;
+    std::mt19937_64 rng{std::random_device{}()};
 
-    void prepare(grpc::ClientContext& context) const {
-        if (options.call_timeout.count() > 0) {
+    // Deadline (unary calls only: a stream lives as long as its caller wants) and the token.
+    void prepare(grpc::ClientContext& context, bool unary = true) const {
+        if (unary && options.call_timeout.count() > 0) {
             context.set_deadline(deadline_after(options.call_timeout));
         }
+        if (!options.token.empty()) {
+            context.AddMetadata("authorization", "Bearer " + options.token);
+        }
+    }
+
+    // One connection attempt: ok once the channel is READY; unavailable when an attempt made
+    // while we waited ended in TRANSIENT_FAILURE (refused, reset, a failed TLS handshake), or
+    // at the deadline. The channel's own reconnect backoff is reset first, so that each of our
+    // attempts really dials instead of waiting out gRPC's schedule.
+    Status ensure_connected(std::chrono::milliseconds timeout) {
+        auto state = channel->GetState(true);
+        if (state == GRPC_CHANNEL_READY) {
+            return {};
+        }
+        if (state == GRPC_CHANNEL_TRANSIENT_FAILURE) {
+            grpc::experimental::ChannelResetConnectionBackoff(channel.get());
+        }
+        const auto deadline = deadline_after(timeout);
+        bool attempted = state == GRPC_CHANNEL_CONNECTING;
+        for (;;) {
+            if (state == GRPC_CHANNEL_READY) {
+                return {};
+            }
+            if (state == GRPC_CHANNEL_SHUTDOWN) {
+                return {StatusCode::unavailable, "the channel to " + address + " is shut down"};
+            }
+            if (state == GRPC_CHANNEL_TRANSIENT_FAILURE && attempted) {
+                return {StatusCode::unavailable, unreachable("the connection attempt failed")};
+            }
+            if (!channel->WaitForStateChange(state, deadline)) {
+                return {StatusCode::unavailable,
+                        unreachable("no connection within " +
+                                    milliseconds_text(options.connect_timeout))};
+            }
+            // Whatever we see next, the channel went through a connection attempt.
+            attempted = true;
+            state = channel->GetState(true);
+        }
+    }
+
+    std::string unreachable(const std::string& why) const {
+        std::string out = "cannot reach proximad at " + address + ": " + why;
+        if (options.tls) {
+            out +=
+                " (over TLS: does the daemon serve TLS, does its certificate chain to the root "
+                "CA and name the host or the server-name override?)";
+        }
+        return out;
+    }
+
+    std::chrono::milliseconds backoff(const RetryOptions& retry, int attempt) {
+        double cap = static_cast<double>(retry.initial_backoff.count()) *
+                     std::pow(std::max(retry.multiplier, 1.0), attempt - 1);
+        cap = std::min(cap, static_cast<double>(retry.max_backoff.count()));
+        cap = std::max(cap, 0.0);
+        if (!retry.jitter) {
+            return std::chrono::milliseconds(static_cast<std::int64_t>(cap));
+        }
+        std::lock_guard lock(rng_mu);
+        std::uniform_real_distribution<double> draw(0.0, cap);
+        return std::chrono::milliseconds(static_cast<std::int64_t>(draw(rng)));
+    }
+
+    // Runs `attempt` (which returns a Status) under `retry`: an UNAVAILABLE answer, or a
+    // connection that cannot be made, waits a backoff and tries again. `sent` tells whether the
+    // failed attempt got as far as issuing the call (connected first), for Retry::unsent_only.
+    // `committed` (if given) is set by an attempt once the caller has seen part of its answer
+    // (a streamed event): a repeat would show it twice, so from then on nothing is retried.
+    template <class Attempt>
+    Status with_retries(const RetryOptions& retry, const std::string& operation, Retry policy,
+                        Attempt&& attempt, const bool* committed = nullptr) {
+        const auto start = std::chrono::steady_clock::now();
+        for (int n = 1;; ++n) {
+            bool sent = false;
+            Status status = ensure_connected(options.connect_timeout);
+            if (status.ok()) {
+                sent = true;
+                status = attempt();
+            }
+            if (status.code() != StatusCode::unavailable ||
+                (sent && policy == Retry::unsent_only) || (committed && *committed)) {
+                return status;
+            }
+            if (n >= std::max(retry.max_attempts, 1)) {
+                return give_up(status, n, start);
+            }
+            const auto delay = backoff(retry, n);
+            const auto elapsed = std::chrono::steady_clock::now() - start;
+            if (retry.max_total.count() > 0 && elapsed + delay > retry.max_total) {
+                return give_up(status, n, start);
+            }
+            if (retry.on_retry) {
+                retry.on_retry(RetryEvent{operation, n, status, delay});
+            }
+            std::this_thread::sleep_for(delay);
+        }
+    }
+
+    Status give_up(const Status& last, int attempts,
+                   std::chrono::steady_clock::time_point start) const {
+        if (attempts <= 1) {
+            return last;
+        }
+        const auto took = std::chrono::duration_cast<std::chrono::milliseconds>(
+            std::chrono::steady_clock::now() - start);
+        return {last.code(), last.message() + " (" + std::to_string(attempts) + " attempts in " +
+                                 milliseconds_text(took) + ")"};
+    }
+
+    // A unary RPC: a fresh context per attempt (a context serves one call only).
+    template <class Call>
+    Status unary(const std::string& operation, Retry policy, Call&& call) {
+        return with_retries(options.retry, operation, policy, [&] {
+            grpc::ClientContext context;
+            prepare(context);
+            return from_grpc(call(context));
+        });
     }
 };
 
@@ -81,6 +392,11 @@ struct FrameStream::Impl {
     }
 };
 
+namespace {
+Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedMesh& mesh,
+                   bool float32, pb::ObjectInfo* info_out);
+}  // namespace
+
 // --- Client ----------------------------------------------------------------------------------
 
 Client::Client(std::unique_ptr<Impl> impl) : m_impl(std::move(impl)) {}
@@ -88,32 +404,62 @@ Client::~Client() = default;
 
 StatusOr<std::unique_ptr<Client>> Client::connect(const std::string& address,
                                                   ConnectOptions options) {
+    if (auto st = check_token(options.token, "the token"); !st.ok()) {
+        return st;
+    }
     grpc::ChannelArguments args;
     // Results of big scenes (self distances per triangle) outgrow gRPC's 4 MiB default; the
     // server's own limits bound what it accepts, so the client does not cap either direction.
     args.SetMaxReceiveMessageSize(-1);
     args.SetMaxSendMessageSize(-1);
-    auto channel = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
-    if (!channel->WaitForConnected(deadline_after(options.connect_timeout))) {
-        return Status(StatusCode::unavailable, "cannot reach proximad at " + address + " within " +
-                                                   std::to_string(options.connect_timeout.count()) +
-                                                   " ms");
+    // gRPC's own reconnect schedule (1 s, growing to 120 s) would leave a restarted daemon
+    // unseen for long; ours is the one that counts (ensure_connected resets gRPC's between our
+    // attempts), so gRPC's is kept within the same bounds.
+    const auto initial = std::max<std::int64_t>(options.retry.initial_backoff.count(), 1);
+    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(initial));
+    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(initial));
+    args.SetInt(
+        GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+        static_cast<int>(std::max<std::int64_t>(options.retry.max_backoff.count(), initial)));
+    std::shared_ptr<grpc::ChannelCredentials> credentials;
+    if (options.tls) {
+        if (auto st = check_tls(*options.tls); !st.ok()) {
+            return st;
+        }
+        grpc::SslCredentialsOptions ssl;
+        ssl.pem_root_certs = options.tls->root_ca_pem;
+        ssl.pem_cert_chain = options.tls->client_cert_pem;
+        ssl.pem_private_key = options.tls->client_key_pem;
+        credentials = grpc::SslCredentials(ssl);
+        if (!options.tls->server_name_override.empty()) {
+            args.SetSslTargetNameOverride(options.tls->server_name_override);
+        }
+    } else {
+        credentials = grpc::InsecureChannelCredentials();
     }
     auto impl = std::make_unique<Impl>();
     impl->address = address;
-    impl->options = options;
-    impl->stub = pb::Proximity::NewStub(channel);
-    impl->channel = std::move(channel);
+    impl->options = std::move(options);
+    impl->channel = grpc::CreateCustomChannel(address, credentials, args);
+    impl->stub = pb::Proximity::NewStub(impl->channel);
+    // Connecting is always safe to repeat.
+    if (auto st = impl->with_retries(impl->options.retry, "connect", Retry::idempotent,
+                                     [] { return Status(); });
+        !st.ok()) {
+        return st;
+    }
     return std::unique_ptr<Client>(new Client(std::move(impl)));
 }
 
 StatusOr<RemoteServerInfo> Client::server_info() {
-    grpc::ClientContext context;
-    m_impl->prepare(context);
     pb::ServerInfo info;
-    if (auto st = m_impl->stub->GetServerInfo(&context, pb::GetServerInfoRequest(), &info);
+    if (auto st = m_impl->unary("GetServerInfo", Retry::idempotent,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub->GetServerInfo(
+                                        &context, pb::GetServerInfoRequest(), &info);
+                                });
         !st.ok()) {
-        return from_grpc(st);
+        return st;
     }
     return detail::decode_server_info(info);
 }
@@ -137,13 +483,14 @@ StatusOr<RemoteScene> Client::create_scene(const std::string& name,
         used += bytes;
         detail::encode_mesh(objects[inline_count], float32, request.add_objects());
     }
+    // Not idempotent: a repeat after a lost answer would leave a second scene behind.
     pb::SceneInfo info;
-    {
-        grpc::ClientContext context;
-        m_impl->prepare(context);
-        if (auto st = m_impl->stub->CreateScene(&context, request, &info); !st.ok()) {
-            return from_grpc(st);
-        }
+    if (auto st = m_impl->unary("CreateScene", Retry::unsent_only,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub->CreateScene(&context, request, &info);
+                                });
+        !st.ok()) {
+        return st;
     }
     auto scene = detail::decode_scene(info);
     for (std::size_t i = inline_count; i < objects.size(); ++i) {
@@ -160,24 +507,35 @@ StatusOr<RemoteScene> Client::create_scene(const std::string& name,
 }
 
 StatusOr<RemoteScene> Client::describe_scene(const std::string& scene_id) {
-    grpc::ClientContext context;
-    m_impl->prepare(context);
     pb::DescribeSceneRequest request;
     request.set_scene_id(scene_id);
     pb::SceneInfo info;
-    if (auto st = m_impl->stub->DescribeScene(&context, request, &info); !st.ok()) {
-        return from_grpc(st);
+    if (auto st = m_impl->unary("DescribeScene", Retry::idempotent,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub->DescribeScene(&context, request, &info);
+                                });
+        !st.ok()) {
+        return st;
     }
     return detail::decode_scene(info);
 }
 
 Status Client::delete_scene(const std::string& scene_id) {
-    grpc::ClientContext context;
-    m_impl->prepare(context);
     pb::DeleteSceneRequest request;
     request.set_scene_id(scene_id);
     pb::DeleteSceneResponse response;
-    return from_grpc(m_impl->stub->DeleteScene(&context, request, &response));
+    // Repeating a delete cannot harm. A repeat that finds no scene means an earlier attempt (whose
+    // answer was lost) or a daemon restart removed it: the caller's wish holds, so it is ok; only
+    // a first attempt's NOT_FOUND (a wrong id) is reported.
+    int attempts = 0;
+    Status st = m_impl->unary("DeleteScene", Retry::idempotent, [&](grpc::ClientContext& context) {
+        ++attempts;
+        return m_impl->stub->DeleteScene(&context, request, &response);
+    });
+    if (st.code() == StatusCode::not_found && attempts > 1) {
+        return {};
+    }
+    return st;
 }
 
 StatusOr<RemoteObject> Client::upload_object(const std::string& scene_id, const NamedMesh& mesh) {
@@ -190,11 +548,27 @@ StatusOr<RemoteObject> Client::upload_object(const std::string& scene_id, const 
                                 " triangles exceed the API's 32-bit counts");
     }
     const bool float32 = m_impl->options.float32_vertices;
-
-    grpc::ClientContext context;
-    m_impl->prepare(context);
     pb::ObjectInfo info;
-    auto writer = m_impl->stub->UploadObject(&context, &info);
+    // Not idempotent (an upload appends): retried only when it never went out.
+    Status status = m_impl->with_retries(
+        m_impl->options.retry, "UploadObject", Retry::unsent_only,
+        [&] { return upload_once(m_impl.get(), scene_id, mesh, float32, &info); });
+    if (!status.ok()) {
+        return status;
+    }
+    return detail::decode_object(info);
+}
+
+namespace {
+
+Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedMesh& mesh,
+                   bool float32, pb::ObjectInfo* info_out) {
+    const auto& vertices = mesh.mesh.vertices;
+    const auto& triangles = mesh.mesh.triangles;
+    grpc::ClientContext context;
+    impl->prepare(context);
+    pb::ObjectInfo& info = *info_out;
+    auto writer = impl->stub->UploadObject(&context, &info);
 
     // A failed write means the server has ended the call: stop sending, Finish says why.
     bool open = true;
@@ -228,20 +602,27 @@ StatusOr<RemoteObject> Client::upload_object(const std::string& scene_id, const 
     if (open) {
         writer->WritesDone();
     }
-    if (auto st = writer->Finish(); !st.ok()) {
-        return from_grpc(st);
-    }
-    return detail::decode_object(info);
+    return from_grpc(writer->Finish());
 }
+
+}  // namespace
 
 StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRequest& frame) {
     pb::Frame request;
     detail::encode_frame(frame, scene_id, m_impl->options.float32_vertices, &request);
-    grpc::ClientContext context;
-    m_impl->prepare(context);
+    // Positions are absolute, so a frame that only moves vertices and asks questions leaves the
+    // same scene when applied twice. Additions, removals and topology changes would not, and a
+    // CCD frame interpolates from the positions before it, which a lost first attempt moved.
+    const auto& u = frame.update;
+    const bool repeatable =
+        u.additions.empty() && u.removals.empty() && u.replacements.empty() && !frame.ccd;
     pb::FrameResult result;
-    if (auto st = m_impl->stub->Query(&context, request, &result); !st.ok()) {
-        return from_grpc(st);
+    if (auto st = m_impl->unary("Query", repeatable ? Retry::idempotent : Retry::unsent_only,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub->Query(&context, request, &result);
+                                });
+        !st.ok()) {
+        return st;
     }
     return detail::decode_result(result);
 }
@@ -250,8 +631,17 @@ StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& sc
     auto impl = std::make_unique<FrameStream::Impl>();
     impl->float32 = m_impl->options.float32_vertices;
     impl->scene_id = scene_id;
+    // Waiting for a connection (with the retry policy) is safe: nothing is sent yet. Streams are
+    // not retried once open (frames change the scene; ResilientScene is the way to survive a
+    // daemon going away).
+    if (auto st = m_impl->with_retries(m_impl->options.retry, "StreamFrames", Retry::unsent_only,
+                                       [] { return Status(); });
+        !st.ok()) {
+        return st;
+    }
     // No deadline: a stream lives as long as the simulation. The call starts lazily; a daemon
     // that refuses it (unknown scene, too many streams) answers on the first receive().
+    m_impl->prepare(impl->context, false);
     impl->stream = m_impl->stub->StreamFrames(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a frame stream");
@@ -341,12 +731,14 @@ void FrameStream::cancel() {
 // --- Massive models ----------------------------------------------------------------------------
 
 StatusOr<RemoteModelList> Client::list_models() {
-    grpc::ClientContext context;
-    m_impl->prepare(context);
     pb::ListModelsResponse response;
-    if (auto st = m_impl->stub->ListModels(&context, pb::ListModelsRequest(), &response);
+    if (auto st = m_impl->unary("ListModels", Retry::idempotent,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub->ListModels(
+                                        &context, pb::ListModelsRequest(), &response);
+                                });
         !st.ok()) {
-        return from_grpc(st);
+        return st;
     }
     return detail::decode_model_list(response);
 }
@@ -354,43 +746,53 @@ StatusOr<RemoteModelList> Client::list_models() {
 StatusOr<RemoteVerifySummary> Client::verify_model(
     const std::string& model, double tolerance,
     const std::function<bool(const VerifyEvent&)>& on_event, std::chrono::milliseconds timeout) {
-    grpc::ClientContext context;
-    if (timeout.count() > 0) {
-        context.set_deadline(deadline_after(timeout));
-    }
     pb::VerifyModelRequest request;
     request.set_model(model);
     request.set_tolerance(tolerance);
-    auto reader = m_impl->stub->VerifyModel(&context, request);
-    pb::VerifyModelEvent event;
     std::optional<RemoteVerifySummary> summary;
     bool stopped = false;
-    while (reader->Read(&event)) {
-        if (stopped) {
-            continue;  // cancelled: drain what is in flight until the call ends
-        }
-        VerifyEvent out;
-        switch (event.event_case()) {
-            case pb::VerifyModelEvent::kProgress:
-                out.kind = VerifyEvent::Kind::progress;
-                out.progress = detail::decode_progress(event.progress());
-                break;
-            case pb::VerifyModelEvent::kPair:
-                out.kind = VerifyEvent::Kind::pair;
-                out.pair = detail::decode_object_pair(event.pair());
-                break;
-            case pb::VerifyModelEvent::kSummary:
-                summary = detail::decode_verify_summary(event.summary());
-                continue;
-            default:
-                continue;
-        }
-        if (on_event && !on_event(out)) {
-            stopped = true;
-            context.TryCancel();
-        }
-    }
-    Status status = from_grpc(reader->Finish());
+    // Verification only reads, so a call that failed before the caller saw any event is repeated;
+    // after one, a repeat would hand out the same events again.
+    bool delivered = false;
+    Status status = m_impl->with_retries(
+        m_impl->options.retry, "VerifyModel", Retry::idempotent,
+        [&] {
+            grpc::ClientContext context;
+            m_impl->prepare(context, false);
+            if (timeout.count() > 0) {
+                context.set_deadline(deadline_after(timeout));
+            }
+            auto reader = m_impl->stub->VerifyModel(&context, request);
+            pb::VerifyModelEvent event;
+            while (reader->Read(&event)) {
+                if (stopped) {
+                    continue;  // cancelled: drain what is in flight until the call ends
+                }
+                VerifyEvent out;
+                switch (event.event_case()) {
+                    case pb::VerifyModelEvent::kProgress:
+                        out.kind = VerifyEvent::Kind::progress;
+                        out.progress = detail::decode_progress(event.progress());
+                        break;
+                    case pb::VerifyModelEvent::kPair:
+                        out.kind = VerifyEvent::Kind::pair;
+                        out.pair = detail::decode_object_pair(event.pair());
+                        break;
+                    case pb::VerifyModelEvent::kSummary:
+                        summary = detail::decode_verify_summary(event.summary());
+                        continue;
+                    default:
+                        continue;
+                }
+                delivered = true;
+                if (on_event && !on_event(out)) {
+                    stopped = true;
+                    context.TryCancel();
+                }
+            }
+            return from_grpc(reader->Finish());
+        },
+        &delivered);
     if (stopped) {
         return Status(StatusCode::cancelled, "verification cancelled by the caller");
     }
@@ -481,6 +883,13 @@ StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& j
                                                              std::chrono::milliseconds timeout) {
     auto impl = std::make_unique<ReviewSession::Impl>();
     impl->float32 = m_impl->options.float32_vertices;
+    // A join adds a member to a room: only the wait for a connection is retried.
+    if (auto st = m_impl->with_retries(m_impl->options.retry, "Review", Retry::unsent_only,
+                                       [] { return Status(); });
+        !st.ok()) {
+        return st;
+    }
+    m_impl->prepare(impl->context, false);
     impl->stream = m_impl->stub->Review(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a review stream");
@@ -618,6 +1027,474 @@ Status ReviewSession::finish() {
 
 void ReviewSession::cancel() {
     m_impl->context.TryCancel();
+}
+
+// --- ResilientScene --------------------------------------------------------------------------
+
+struct ResilientScene::Impl {
+    // One object of the session's copy of the scene, in result order.
+    struct Tracked {
+        ObjectId session = 0;
+        NamedMesh mesh;
+    };
+    // A frame sent and not yet answered, in the caller's (session) ids.
+    struct Pending {
+        FrameRequest frame;
+        bool resent = false;  // already re-sent on a re-created scene
+    };
+
+    Client* client = nullptr;
+    ResilientSceneOptions options;
+    std::string name;
+    std::string scene_id;
+    std::unique_ptr<FrameStream> stream;
+    std::vector<Tracked> objects;
+    // Session <-> daemon ids. Identity until a re-created scene numbers objects differently.
+    std::unordered_map<ObjectId, ObjectId> to_daemon;
+    std::unordered_map<ObjectId, ObjectId> to_session;
+    bool remapped = false;
+    ObjectId next_session = 1;
+    std::deque<Pending> pending;
+    // Answers taken from a failed stream during recovery (the old daemon sent them before it
+    // went away), or the errors of frames lost with the session; handed out before anything new.
+    std::deque<StatusOr<FrameResponse>> ready;
+    std::uint64_t recreations = 0;
+    bool mark_next = false;  // the next answer from the new stream is flagged recreated_scene
+    bool ended = false;
+    Status final_status;
+
+    void learn(ObjectId daemon_id, ObjectId session_id) {
+        to_daemon[session_id] = daemon_id;
+        to_session[daemon_id] = session_id;
+        next_session = std::max(next_session, session_id + 1);
+    }
+
+    void forget(ObjectId session_id) {
+        auto it = to_daemon.find(session_id);
+        if (it != to_daemon.end()) {
+            to_session.erase(it->second);
+            to_daemon.erase(it);
+        }
+    }
+
+    // A daemon id the session has not seen: before any remapping the daemon's own ids serve (so
+    // a session that never lost its daemon shows exactly the daemon's ids); after, fresh ones.
+    ObjectId adopt(ObjectId daemon_id) {
+        const ObjectId session_id = remapped ? next_session : daemon_id;
+        learn(daemon_id, session_id);
+        return session_id;
+    }
+
+    StatusOr<ObjectId> daemon_id(ObjectId session_id) const {
+        auto it = to_daemon.find(session_id);
+        if (it != to_daemon.end()) {
+            return it->second;
+        }
+        if (!remapped) {
+            return session_id;  // the daemon judges ids it does not know (NOT_FOUND)
+        }
+        return not_found("object " + std::to_string(session_id) +
+                         " is not in the session's scene (as of the last answered frame)");
+    }
+
+    StatusOr<FrameRequest> to_wire(const FrameRequest& frame) const {
+        FrameRequest out = frame;
+        for (auto& id : out.update.removals) {
+            auto d = daemon_id(id);
+            if (!d.ok()) {
+                return d.status();
+            }
+            id = d.value();
+        }
+        for (auto& r : out.update.replacements) {
+            auto d = daemon_id(r.object);
+            if (!d.ok()) {
+                return d.status();
+            }
+            r.object = d.value();
+        }
+        for (auto& p : out.update.positions) {
+            auto d = daemon_id(p.object);
+            if (!d.ok()) {
+                return d.status();
+            }
+            p.object = d.value();
+        }
+        return out;
+    }
+
+    // The answer to the oldest pending frame: new ids learnt, the session's copy brought to the
+    // state after the frame (the engine's order: removals, replacements, positions, additions),
+    // ids translated, and the copy checked against the daemon's object list.
+    StatusOr<FrameResponse> accept(FrameResponse response) {
+        const FrameRequest frame = std::move(pending.front().frame);
+        pending.pop_front();
+        const auto& u = frame.update;
+        if (response.added_ids.size() != u.additions.size() ||
+            response.fragment_ids.size() != u.replacements.size()) {
+            return Status(StatusCode::internal,
+                          "the daemon's answer to frame " + std::to_string(frame.frame) +
+                              " lists ids for other changes than the frame made");
+        }
+        for (std::size_t i = 0; i < u.replacements.size(); ++i) {
+            if (response.fragment_ids[i].size() != u.replacements[i].fragments.size()) {
+                return Status(StatusCode::internal, "the daemon's answer to frame " +
+                                                        std::to_string(frame.frame) +
+                                                        " has the wrong number of fragment ids");
+            }
+        }
+        auto index_of = [&](ObjectId session_id) -> std::ptrdiff_t {
+            for (std::size_t i = 0; i < objects.size(); ++i) {
+                if (objects[i].session == session_id) {
+                    return static_cast<std::ptrdiff_t>(i);
+                }
+            }
+            return -1;
+        };
+        // Removals and replacements name objects in session ids (the caller's).
+        for (auto id : u.removals) {
+            if (auto i = index_of(id); i >= 0) {
+                objects.erase(objects.begin() + i);
+            }
+            forget(id);
+        }
+        for (std::size_t r = 0; r < u.replacements.size(); ++r) {
+            const auto& rep = u.replacements[r];
+            auto i = index_of(rep.object);
+            forget(rep.object);
+            std::vector<Tracked> fragments;
+            for (std::size_t f = 0; f < rep.fragments.size(); ++f) {
+                const ObjectId s = adopt(response.fragment_ids[r][f]);
+                response.fragment_ids[r][f] = s;
+                fragments.push_back({s, rep.fragments[f]});
+            }
+            if (i >= 0) {
+                objects.erase(objects.begin() + i);
+                objects.insert(objects.begin() + i, fragments.begin(), fragments.end());
+            }
+        }
+        for (const auto& p : u.positions) {
+            if (auto i = index_of(p.object); i >= 0) {
+                objects[static_cast<std::size_t>(i)].mesh.mesh.vertices = p.vertices;
+            }
+        }
+        for (std::size_t a = 0; a < u.additions.size(); ++a) {
+            const ObjectId s = adopt(response.added_ids[a]);
+            response.added_ids[a] = s;
+            objects.push_back({s, u.additions[a]});
+        }
+        bool same = response.object_ids.size() == objects.size();
+        for (std::size_t i = 0; same && i < objects.size(); ++i) {
+            auto it = to_session.find(response.object_ids[i]);
+            same = it != to_session.end() && it->second == objects[i].session;
+            if (same) {
+                response.object_ids[i] = it->second;
+            }
+        }
+        if (!same) {
+            return Status(StatusCode::internal,
+                          "after frame " + std::to_string(frame.frame) +
+                              " the daemon's scene and the session's copy differ");
+        }
+        response.scene_id = scene_id;
+        if (mark_next) {
+            response.recreated_scene = true;
+            mark_next = false;
+        }
+        return response;
+    }
+
+    void end(const Status& status) {
+        ended = true;
+        final_status = status;
+        if (stream) {
+            stream->cancel();
+            (void)stream->finish();
+        }
+        // Every frame still in flight gets this outcome, in order: none vanishes.
+        while (!pending.empty()) {
+            pending.pop_front();
+            ready.push_back(status);
+        }
+    }
+
+    std::vector<NamedMesh> meshes() const {
+        std::vector<NamedMesh> out;
+        out.reserve(objects.size());
+        for (const auto& o : objects) {
+            out.push_back(o.mesh);
+        }
+        return out;
+    }
+
+    // After `cause` (unavailable) on the stream: keep what the old stream still holds, then
+    // reconnect with backoff, re-create the scene from the session's copy, re-send the frames in
+    // flight (once each). Ends the session when that cannot be done.
+    void recover(const Status& cause) {
+        // Answers the old daemon sent before it went away are still good (and in order).
+        while (!pending.empty()) {
+            auto r = stream->receive();
+            if (!r.ok()) {
+                break;
+            }
+            ready.push_back(accept(std::move(r).value()));
+        }
+        (void)stream->finish();
+        stream.reset();
+        for (const auto& p : pending) {
+            if (p.resent) {
+                end(Status(StatusCode::unavailable,
+                           "the daemon went away again before answering frame " +
+                               std::to_string(p.frame.frame) +
+                               ", already re-sent on a re-created scene: " + cause.message()));
+                return;
+            }
+        }
+        const std::string old_scene = scene_id;
+        auto& c = *client->m_impl;
+        bool ids_remapped = false;
+        Status status = c.with_retries(options.recovery, "recover scene", Retry::idempotent, [&] {
+            // The old scene goes first: if the daemon survived (a dropped connection), it may
+            // hold frames we never saw answered; a fresh scene from our copy is the state the
+            // caller saw. NOT_FOUND (a restarted daemon) is the usual answer. (After a failed
+            // attempt, `scene_id` is that attempt's scene, which goes the same way.)
+            {
+                grpc::ClientContext context;
+                c.prepare(context);
+                pb::DeleteSceneRequest request;
+                request.set_scene_id(scene_id);
+                pb::DeleteSceneResponse response;
+                const auto st = from_grpc(c.stub->DeleteScene(&context, request, &response));
+                if (st.code() == StatusCode::unavailable) {
+                    return st;
+                }
+            }
+            auto created = client->create_scene(name, meshes());
+            if (!created.ok()) {
+                return created.status();
+            }
+            if (created->objects.size() != objects.size()) {
+                return Status(StatusCode::internal, "the re-created scene has " +
+                                                        std::to_string(created->objects.size()) +
+                                                        " objects, the session's copy " +
+                                                        std::to_string(objects.size()));
+            }
+            scene_id = created->scene_id;
+            // The new daemon numbers objects its own way: check and remap.
+            bool identity = true;
+            ObjectId highest = 0;
+            for (std::size_t i = 0; i < objects.size(); ++i) {
+                identity = identity && created->objects[i].id == objects[i].session;
+                highest = std::max(highest, created->objects[i].id);
+            }
+            // Identity also needs the daemon's next ids to be unused by the session (ids of
+            // objects removed earlier must not come back).
+            if (!identity || highest + 1 < next_session) {
+                remapped = true;
+                ids_remapped = true;
+            }
+            to_daemon.clear();
+            to_session.clear();
+            for (std::size_t i = 0; i < objects.size(); ++i) {
+                learn(created->objects[i].id, objects[i].session);
+            }
+            auto opened = client->open_stream(scene_id);
+            if (!opened.ok()) {
+                return opened.status();
+            }
+            stream = std::move(opened).value();
+            for (auto& p : pending) {
+                auto wire = to_wire(p.frame);
+                if (!wire.ok()) {
+                    return wire.status();
+                }
+                if (auto st = stream->send(wire.value()); !st.ok()) {
+                    return st;
+                }
+            }
+            return Status();
+        });
+        if (!status.ok()) {
+            end(status.code() == StatusCode::unavailable
+                    ? Status(StatusCode::unavailable,
+                             "could not re-create the scene after the daemon went away (" +
+                                 cause.message() + "): " + status.message())
+                    : status);
+            return;
+        }
+        for (auto& p : pending) {
+            p.resent = true;
+        }
+        ++recreations;
+        mark_next = !pending.empty();
+        if (options.on_recreated) {
+            options.on_recreated(SceneRecreation{old_scene, scene_id, recreations, pending.size(),
+                                                 cause, ids_remapped});
+        }
+    }
+};
+
+StatusOr<std::unique_ptr<ResilientScene>> ResilientScene::create(
+    Client& client, const std::string& name, const std::vector<NamedMesh>& objects,
+    ResilientSceneOptions options) {
+    auto created = client.create_scene(name, objects);
+    if (!created.ok()) {
+        return created.status();
+    }
+    auto impl = std::make_unique<Impl>();
+    impl->client = &client;
+    impl->options = std::move(options);
+    impl->name = name;
+    impl->scene_id = created->scene_id;
+    for (std::size_t i = 0; i < objects.size(); ++i) {
+        impl->objects.push_back({created->objects[i].id, objects[i]});
+        impl->learn(created->objects[i].id, created->objects[i].id);
+    }
+    auto stream = client.open_stream(impl->scene_id);
+    if (!stream.ok()) {
+        (void)client.delete_scene(impl->scene_id);
+        return stream.status();
+    }
+    impl->stream = std::move(stream).value();
+    return std::make_unique<ResilientScene>(std::move(impl));
+}
+
+ResilientScene::ResilientScene(std::unique_ptr<Impl> impl) : m_impl(std::move(impl)) {}
+
+ResilientScene::~ResilientScene() {
+    if (!m_impl) {
+        return;
+    }
+    if (m_impl->stream) {
+        m_impl->stream->cancel();
+        (void)m_impl->stream->finish();
+    }
+    if (!m_impl->scene_id.empty()) {
+        // One attempt: a destructor must not sleep through a backoff schedule.
+        auto& c = *m_impl->client->m_impl;
+        grpc::ClientContext context;
+        c.prepare(context);
+        if (c.options.call_timeout.count() == 0) {
+            context.set_deadline(deadline_after(c.options.connect_timeout));
+        }
+        pb::DeleteSceneRequest request;
+        request.set_scene_id(m_impl->scene_id);
+        pb::DeleteSceneResponse response;
+        (void)c.stub->DeleteScene(&context, request, &response);
+    }
+}
+
+const std::string& ResilientScene::scene_id() const {
+    return m_impl->scene_id;
+}
+
+std::vector<ObjectId> ResilientScene::object_ids() const {
+    std::vector<ObjectId> out;
+    out.reserve(m_impl->objects.size());
+    for (const auto& o : m_impl->objects) {
+        out.push_back(o.session);
+    }
+    return out;
+}
+
+std::uint64_t ResilientScene::recreations() const {
+    return m_impl->recreations;
+}
+
+Status ResilientScene::send(const FrameRequest& frame) {
+    auto& s = *m_impl;
+    if (s.ended) {
+        return s.final_status.ok()
+                   ? Status(StatusCode::failed_precondition, "the resilient scene has ended")
+                   : s.final_status;
+    }
+    auto wire = s.to_wire(frame);
+    if (!wire.ok()) {
+        return wire.status();
+    }
+    // From here the frame is the session's: whatever happens, receive() gives its outcome.
+    s.pending.push_back({frame, false});
+    Status sent = s.stream->send(wire.value());
+    if (sent.ok()) {
+        return {};
+    }
+    if (sent.code() == StatusCode::unavailable) {
+        s.recover(sent);  // re-sends this frame too, or ends the session with its outcome
+        return {};
+    }
+    // The daemon ended the stream for another reason (an earlier frame rejected, a quota):
+    // its answers up to the failure stay readable, then each frame in flight gets the status.
+    while (!s.pending.empty()) {
+        auto r = s.stream->receive();
+        if (!r.ok()) {
+            break;
+        }
+        s.ready.push_back(s.accept(std::move(r).value()));
+    }
+    s.end(sent);
+    return {};
+}
+
+StatusOr<FrameResponse> ResilientScene::receive() {
+    auto& s = *m_impl;
+    for (;;) {
+        if (!s.ready.empty()) {
+            auto r = std::move(s.ready.front());
+            s.ready.pop_front();
+            return r;
+        }
+        if (s.ended) {
+            return s.final_status.ok()
+                       ? Status(StatusCode::failed_precondition, "the resilient scene has ended")
+                       : s.final_status;
+        }
+        if (s.pending.empty()) {
+            return Status(StatusCode::failed_precondition, "receive() with no frame in flight");
+        }
+        auto r = s.stream->receive();
+        if (r.ok()) {
+            return s.accept(std::move(r).value());
+        }
+        if (r.status().code() == StatusCode::unavailable) {
+            s.recover(r.status());
+            continue;
+        }
+        // A rejected frame (or any other error) ends the stream: this frame gets the status,
+        // later ones too (the daemon answered none of them).
+        s.pending.pop_front();
+        s.ready.push_front(r.status());
+        s.end(r.status());
+    }
+}
+
+StatusOr<FrameResponse> ResilientScene::step(const FrameRequest& frame) {
+    if (auto st = send(frame); !st.ok()) {
+        return st;
+    }
+    return receive();
+}
+
+Status ResilientScene::finish() {
+    auto& s = *m_impl;
+    Status status;
+    if (s.stream) {
+        status = s.stream->finish();
+        s.stream.reset();
+    }
+    s.pending.clear();
+    s.ready.clear();
+    if (!s.ended) {
+        s.ended = true;
+        s.final_status = status;
+    }
+    if (!s.scene_id.empty()) {
+        Status deleted = s.client->delete_scene(s.scene_id);
+        s.scene_id.clear();
+        if (status.ok()) {
+            status = deleted;
+        }
+    }
+    return status;
 }
 
 }  // namespace proxima::client

@@ -22,15 +22,85 @@
 
 namespace proxima::client {
 
+// Transport security (TLS). The daemon presents a PEM certificate, which the client verifies
+// against `root_ca_pem`; for mutual TLS the client presents its own certificate and key too.
+struct TlsOptions {
+    // PEM root certificate(s) the daemon's certificate must chain to; empty: the system's roots.
+    std::string root_ca_pem;
+    // Mutual TLS: this client's PEM certificate (chain) and private key, both or neither.
+    std::string client_cert_pem;
+    std::string client_key_pem;
+    // The name the daemon's certificate must hold (a SAN) instead of the address's host, e.g.
+    // "localhost" when connecting to 127.0.0.1; empty: the host of the address.
+    std::string server_name_override;
+};
+
+// The gRPC code name of a status this library returned: the engine's name ("NOT_FOUND",
+// "UNAVAILABLE", ...), or for the gRPC codes the engine has no name for, which arrive as
+// internal with "gRPC NAME: " in front of the message, that NAME ("UNAUTHENTICATED",
+// "PERMISSION_DENIED", ...).
+std::string grpc_code_name(const Status& status);
+// "UNAUTHENTICATED: <the daemon's message>": Status::to_string with grpc_code_name.
+std::string describe_status(const Status& status);
+
+// Reads TlsOptions from PEM files (an empty path leaves that part empty). The error names the
+// file and the problem: not_found for a missing file, invalid_argument for one that holds no
+// PEM certificate (or key), or for a certificate without a key (and the reverse).
+StatusOr<TlsOptions> load_tls_files(const std::string& root_ca_file,
+                                    const std::string& client_cert_file = {},
+                                    const std::string& client_key_file = {});
+
+// A bearer token kept in a file: its first line, surrounding whitespace trimmed. Errors (missing
+// or unreadable file, an empty first line, characters that cannot travel in a gRPC header) name
+// the file. When the file can be read by every user, `warning` (if given) receives a sentence
+// saying so: the token is a password.
+StatusOr<std::string> read_token_file(const std::string& path, std::string* warning = nullptr);
+
+// One failed attempt that will be retried, as RetryOptions::on_retry sees it.
+struct RetryEvent {
+    std::string operation;  // the RPC ("GetServerInfo", "connect", "recover scene", ...)
+    int attempt = 0;        // the attempt that failed, from 1
+    Status status;          // its error (always unavailable)
+    std::chrono::milliseconds delay{0};  // the sleep before the next attempt
+};
+
+// Reconnecting with exponential backoff and full jitter. An attempt that fails with UNAVAILABLE
+// (no daemon listening, connection refused or reset, the daemon shutting down) is retried after
+// a sleep drawn uniformly from [0, min(max_backoff, initial_backoff * multiplier^(attempt-1))];
+// every other code (INVALID_ARGUMENT, NOT_FOUND, UNAUTHENTICATED, RESOURCE_EXHAUSTED, ...) is
+// returned at once. Which calls retry is in docs/api.md ("Reconnecting"): those safe to repeat.
+struct RetryOptions {
+    // Attempts per call, the first included; 1 never retries.
+    int max_attempts = 5;
+    std::chrono::milliseconds initial_backoff{100};
+    std::chrono::milliseconds max_backoff{5000};
+    double multiplier = 2.0;
+    // No retry whose sleep would end later than this after the first attempt began (0: only
+    // max_attempts bounds it).
+    std::chrono::milliseconds max_total{10000};
+    // Full jitter spreads clients that lost one daemon over the backoff window; false sleeps
+    // exactly the cap (predictable, for tests and single clients).
+    bool jitter = true;
+    // Called before each sleep (from the calling thread); for logs, counters and tests.
+    std::function<void(const RetryEvent&)> on_retry;
+};
+
 struct ConnectOptions {
-    // How long connect() waits for the channel to become ready.
+    // How long connect() waits for the channel to become ready, per attempt.
     std::chrono::milliseconds connect_timeout{5000};
+    // Bearer token: every call (unary, streams, uploads, massive models) carries the metadata
+    // `authorization: Bearer <token>`. Empty: no authorization header.
+    std::string token;
+    // TLS settings; none: a plaintext channel.
+    std::optional<TlsOptions> tls;
     // Deadline for each unary call (0: none).
     std::chrono::milliseconds call_timeout{0};
     // Vertex buffers are sent as float64 by default (exact); float32 halves the bytes.
     bool float32_vertices = false;
     // Meshes larger than this many bytes are sent with the chunked UploadObject RPC.
     std::size_t inline_mesh_bytes = 1u << 20;
+    // Reconnect and retry policy of connect() and of the calls that are safe to repeat.
+    RetryOptions retry;
 };
 
 struct RemoteServerInfo {
@@ -45,6 +115,18 @@ struct RemoteServerInfo {
     std::uint64_t max_triangles_per_scene = 0;
     std::uint64_t max_message_bytes = 0;
     std::uint32_t max_frames_in_flight = 0;
+    // Who the daemon says this client is (the token's name; "" when it checks no tokens) and
+    // that token's quotas (0: unlimited).
+    std::string principal;
+    std::uint64_t quota_max_scenes = 0;
+    std::uint64_t quota_max_objects = 0;
+    std::uint64_t quota_max_triangles = 0;
+    std::uint64_t quota_max_bytes_held = 0;
+    std::uint64_t quota_max_bytes_in_flight = 0;
+    double quota_max_frames_per_second = 0;
+    std::uint64_t quota_max_streams = 0;
+    bool gpu_active = false;
+    std::string gpu_fallback_reason;
 };
 
 struct RemoteObject {
@@ -87,6 +169,9 @@ struct FrameResponse {
     std::optional<ccd::CcdResult> ccd;                // when the frame asked for it
     std::vector<Penetration> penetrations;            // when the frame asked for them
     double server_seconds = 0;
+    // ResilientScene only: true on the first response after the session re-created its scene on
+    // a daemon that had gone away (this response's frame was re-sent on the new scene).
+    bool recreated_scene = false;
 };
 
 // --- Massive models (ListModels, VerifyModel, Review) ---
@@ -250,6 +335,7 @@ class Client {
     struct Impl;
 
   private:
+    friend class ResilientScene;
     explicit Client(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> m_impl;
 };
@@ -304,6 +390,74 @@ class ReviewSession {
 
     struct Impl;
     explicit ReviewSession(std::unique_ptr<Impl> impl);
+
+  private:
+    std::unique_ptr<Impl> m_impl;
+};
+
+// What a ResilientScene tells its caller when it re-created its scene.
+struct SceneRecreation {
+    std::string old_scene_id;
+    std::string new_scene_id;
+    std::uint64_t recreations = 0;  // this one included
+    std::size_t resent_frames = 0;  // frames in flight, re-sent on the new scene
+    Status cause;                   // the unavailable status that started the recovery
+    // The new daemon numbered the objects differently: the session now translates ids both
+    // ways, so the caller keeps using the ids it knows.
+    bool ids_remapped = false;
+};
+
+struct ResilientSceneOptions {
+    // Reconnecting after the daemon went away; longer than a call's default, since a daemon
+    // being restarted (systemd, a supervisor) takes a moment to listen again.
+    RetryOptions recovery = [] {
+        RetryOptions r;
+        r.max_attempts = 12;
+        r.max_backoff = std::chrono::milliseconds(2000);
+        r.max_total = std::chrono::milliseconds(60000);
+        return r;
+    }();
+    // Called (from the thread in send() or receive()) after each re-creation.
+    std::function<void(const SceneRecreation&)> on_recreated;
+};
+
+// A scene on the daemon with a frame stream that survives the daemon going away. It remembers
+// what it sent (object names, topologies, latest positions: its own copy of the scene as of the
+// last answered frame), and when the stream fails with UNAVAILABLE it reconnects with backoff,
+// re-creates the scene from that copy on a new daemon scene (deleting the old one if it still
+// exists), re-sends the frames that were in flight, once, and goes on. Every frame sent gets
+// exactly one outcome from receive(), in order: its response (recreated_scene marks the first one
+// after a re-creation) or an error; none is applied twice to the scene the caller sees, none
+// dropped. Object ids are the session's: the first scene's ids, and when a re-created scene
+// numbers objects differently the session translates, so the caller's ids stay valid. Errors
+// other than UNAVAILABLE end the session like a FrameStream's; so does the daemon going away
+// again before answering a re-sent frame, or running out of recovery attempts. The Client must
+// outlive the session; not thread-safe.
+class ResilientScene {
+  public:
+    static StatusOr<std::unique_ptr<ResilientScene>> create(Client& client, const std::string& name,
+                                                            const std::vector<NamedMesh>& objects,
+                                                            ResilientSceneOptions options = {});
+    ~ResilientScene();  // cancels the stream and deletes the scene (one attempt, no retry)
+
+    // The daemon's id of the current scene (a new one after each re-creation).
+    const std::string& scene_id() const;
+    // The session's object ids in result order, as of the last answered frame.
+    std::vector<ObjectId> object_ids() const;
+    // How many times the scene was re-created.
+    std::uint64_t recreations() const;
+
+    // Sends a frame (ids are the session's); pipelining works as on a FrameStream.
+    Status send(const FrameRequest& frame);
+    // The oldest unanswered frame's response (ids translated to the session's).
+    StatusOr<FrameResponse> receive();
+    // send() then receive().
+    StatusOr<FrameResponse> step(const FrameRequest& frame);
+    // Ends the stream (results not yet received are dropped) and deletes the scene.
+    Status finish();
+
+    struct Impl;
+    explicit ResilientScene(std::unique_ptr<Impl> impl);
 
   private:
     std::unique_ptr<Impl> m_impl;
