@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <iostream>
+#include <iterator>
 #include <limits>
 #include <string_view>
 #include <utility>
@@ -11,6 +13,8 @@
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+
+#include "auth.hpp"
 
 namespace proxima::server {
 
@@ -38,6 +42,28 @@ Status read_string(const nlohmann::json& value, const std::string& key, std::str
         return invalid_argument("config key '" + key + "' must be a string, got " + value.dump());
     }
     out = value.get<std::string>();
+    return {};
+}
+
+Status read_bool(const nlohmann::json& value, const std::string& key, bool& out) {
+    if (!value.is_boolean()) {
+        return invalid_argument("config key '" + key + "' must be true or false, got " +
+                                value.dump());
+    }
+    out = value.get<bool>();
+    return {};
+}
+
+// A PEM file the daemon will need: readable, and holding at least one PEM block.
+Status check_pem(const std::string& path, const char* key) {
+    std::ifstream in(path);
+    if (!in) {
+        return invalid_argument(std::string(key) + ": cannot read " + path);
+    }
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text.find("-----BEGIN ") == std::string::npos) {
+        return invalid_argument(std::string(key) + ": " + path + " holds no PEM block");
+    }
     return {};
 }
 
@@ -83,6 +109,22 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
             s = read_string(value, key, base.models_dir);
         } else if (key == "cache-bytes") {
             s = read_unsigned(value, key, base.cache_bytes);
+        } else if (key == "tls-cert") {
+            s = read_string(value, key, base.tls_cert);
+        } else if (key == "tls-key") {
+            s = read_string(value, key, base.tls_key);
+        } else if (key == "tls-client-ca") {
+            s = read_string(value, key, base.tls_client_ca);
+        } else if (key == "tokens") {
+            s = read_string(value, key, base.tokens_file);
+        } else if (key == "allow-insecure") {
+            s = read_bool(value, key, base.allow_insecure);
+        } else if (key == "idle-scene-seconds") {
+            s = read_seconds(value, key, base.idle_scene_seconds);
+        } else if (key == "metrics-listen") {
+            s = read_string(value, key, base.metrics_listen);
+        } else if (key == "log-format") {
+            s = read_string(value, key, base.log_format);
         } else {
             // A misspelt key silently falling back to a default is how limits get lost.
             s = invalid_argument("unknown config key '" + key +
@@ -95,16 +137,38 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
     return base;
 }
 
-Status validate_config(const ServerConfig& config) {
-    const auto colon = config.listen.rfind(':');
-    if (colon == std::string::npos || colon == 0 || colon + 1 == config.listen.size()) {
-        return invalid_argument("listen address '" + config.listen + "' is not HOST:PORT");
+bool is_loopback_address(const std::string& host_port) {
+    const auto colon = host_port.rfind(':');
+    const std::string host = colon == std::string::npos ? host_port : host_port.substr(0, colon);
+    return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
+}
+
+namespace {
+
+Status check_address(const std::string& address, const char* key) {
+    const auto colon = address.rfind(':');
+    if (colon == std::string::npos || colon == 0 || colon + 1 == address.size()) {
+        return invalid_argument(std::string(key) + " address '" + address + "' is not HOST:PORT");
     }
-    const auto port = std::string_view(config.listen).substr(colon + 1);
+    const auto port = std::string_view(address).substr(colon + 1);
     if (port.find_first_not_of("0123456789") != std::string_view::npos || port.size() > 5 ||
         std::stoul(std::string(port)) > 65535) {
-        return invalid_argument("listen address '" + config.listen + "': port '" +
+        return invalid_argument(std::string(key) + " address '" + address + "': port '" +
                                 std::string(port) + "' is not a number in 0..65535");
+    }
+    return {};
+}
+
+}  // namespace
+
+Status validate_config(const ServerConfig& config) {
+    if (Status s = check_address(config.listen, "listen"); !s.ok()) {
+        return s;
+    }
+    if (!config.metrics_listen.empty()) {
+        if (Status s = check_address(config.metrics_listen, "metrics-listen"); !s.ok()) {
+            return s;
+        }
     }
     const auto& l = config.limits;
     if (l.max_scenes == 0 || l.max_objects_per_scene == 0 || l.max_triangles_per_scene == 0 ||
@@ -138,6 +202,40 @@ Status validate_config(const ServerConfig& config) {
     if (config.cache_bytes == 0) {
         return invalid_argument("cache-bytes must be at least 1");
     }
+    if (!std::isfinite(config.idle_scene_seconds) || config.idle_scene_seconds < 0) {
+        return invalid_argument("idle-scene-seconds must be a finite number >= 0 (0: never)");
+    }
+    if (config.log_format != "text" && config.log_format != "json") {
+        return invalid_argument("log-format '" + config.log_format + "' is not one of text, json");
+    }
+    // Security: the files must be usable now, not at the first connection.
+    if (config.tls_cert.empty() != config.tls_key.empty()) {
+        return invalid_argument("tls-cert and tls-key go together: give both or neither");
+    }
+    if (!config.tls_client_ca.empty() && config.tls_cert.empty()) {
+        return invalid_argument(
+            "tls-client-ca (mutual TLS) needs TLS: give tls-cert and tls-key too");
+    }
+    for (const auto& [path, key] :
+         {std::pair{config.tls_cert, "tls-cert"}, std::pair{config.tls_key, "tls-key"},
+          std::pair{config.tls_client_ca, "tls-client-ca"}}) {
+        if (!path.empty()) {
+            if (Status s = check_pem(path, key); !s.ok()) {
+                return s;
+            }
+        }
+    }
+    if (config.tls_cert.empty() && !config.allow_insecure && !is_loopback_address(config.listen)) {
+        return invalid_argument(
+            "listen address '" + config.listen +
+            "' is reachable from other machines but TLS is off: give tls-cert and tls-key, or "
+            "allow-insecure to serve plaintext beyond loopback on purpose");
+    }
+    if (!config.tokens_file.empty()) {
+        if (auto auth = Authenticator::from_file(config.tokens_file); !auth.ok()) {
+            return invalid_argument("tokens: " + auth.status().message());
+        }
+    }
     return {};
 }
 
@@ -153,7 +251,15 @@ nlohmann::json config_json(const ServerConfig& c) {
             {"worker-threads", c.worker_threads},
             {"gpu", c.gpu},
             {"models", c.models_dir},
-            {"cache-bytes", c.cache_bytes}};
+            {"cache-bytes", c.cache_bytes},
+            {"tls-cert", c.tls_cert},
+            {"tls-key", c.tls_key},
+            {"tls-client-ca", c.tls_client_ca},
+            {"tokens", c.tokens_file},
+            {"allow-insecure", c.allow_insecure},
+            {"idle-scene-seconds", c.idle_scene_seconds},
+            {"metrics-listen", c.metrics_listen},
+            {"log-format", c.log_format}};
 }
 
 ConfigOutcome load_config(int argc, char** argv) {
@@ -236,11 +342,61 @@ ConfigOutcome load_config(int argc, char** argv) {
             ->default_str(std::to_string(defaults.cache_bytes)),
         [&](ServerConfig& c) { c.cache_bytes = flags.cache_bytes; });
 
+    add(app.add_option("--tls-cert", flags.tls_cert,
+                       "PEM certificate (chain) the daemon presents; with --tls-key turns TLS on")
+            ->type_name("FILE"),
+        [&](ServerConfig& c) { c.tls_cert = flags.tls_cert; });
+    add(app.add_option("--tls-key", flags.tls_key, "PEM private key of --tls-cert")
+            ->type_name("FILE"),
+        [&](ServerConfig& c) { c.tls_key = flags.tls_key; });
+    add(app.add_option("--tls-client-ca", flags.tls_client_ca,
+                       "PEM CA certificates; every client must present a certificate they "
+                       "signed (mutual TLS)")
+            ->type_name("FILE"),
+        [&](ServerConfig& c) { c.tls_client_ca = flags.tls_client_ca; });
+    add(app.add_option("--tokens", flags.tokens_file,
+                       "JSON token file: bearer tokens, the scenes, rooms and models each may "
+                       "use, and its quotas; every call must then present a token")
+            ->type_name("FILE"),
+        [&](ServerConfig& c) { c.tokens_file = flags.tokens_file; });
+    add(app.add_flag("--allow-insecure", flags.allow_insecure,
+                     "allow listening beyond loopback without TLS"),
+        [&](ServerConfig& c) { c.allow_insecure = flags.allow_insecure; });
+    add(app.add_option("--idle-scene-seconds", flags.idle_scene_seconds,
+                       "delete scenes no call used for this long (0: never)")
+            ->default_str("3600"),
+        [&](ServerConfig& c) { c.idle_scene_seconds = flags.idle_scene_seconds; });
+    add(app.add_option("--metrics-listen", flags.metrics_listen,
+                       "HOST:PORT of the Prometheus endpoint (GET /metrics); none when empty")
+            ->type_name("HOST:PORT"),
+        [&](ServerConfig& c) { c.metrics_listen = flags.metrics_listen; });
+    add(app.add_option("--log-format", flags.log_format,
+                       "text (key=value lines) or json (one object per line)")
+            ->default_str(defaults.log_format),
+        [&](ServerConfig& c) { c.log_format = flags.log_format; });
+    bool hash_token = false;
+    app.add_flag("--hash-token", hash_token,
+                 "read a token from standard input, print its SHA-256 for the token file's "
+                 "\"sha256\" key, and exit");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         const int code = app.exit(e);
         return code == 0 ? 0 : 2;
+    }
+    if (hash_token) {
+        std::string token;
+        std::getline(std::cin, token);
+        while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) {
+            token.pop_back();
+        }
+        if (token.size() < 16) {
+            std::fprintf(stderr, "proximad: error: a token needs at least 16 characters\n");
+            return 2;
+        }
+        std::printf("%s\n", sha256_hex(token).c_str());
+        return 0;
     }
 
     ServerConfig config = defaults;

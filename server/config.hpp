@@ -43,7 +43,26 @@ struct ServerConfig {
     std::string models_dir;
     // The budget M of the one geometry cache shared by every model, verification and review room.
     std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
+
+    // Security (docs/server.md "Security"). TLS is on when both PEM files are given; with a
+    // client CA every client must present a certificate it signed (mutual TLS).
+    std::string tls_cert;
+    std::string tls_key;
+    std::string tls_client_ca;
+    // Bearer tokens with their access and quotas; "" checks no tokens (every call anonymous).
+    std::string tokens_file;
+    // Listening beyond loopback without TLS is refused unless this says it is meant.
+    bool allow_insecure = false;
+    // Scenes made by CreateScene that no call used for this long are deleted (0: never).
+    double idle_scene_seconds = 3600.0;
+    // Prometheus text endpoint, HOST:PORT serving GET /metrics; "" serves none.
+    std::string metrics_listen;
+    // "text" (key=value lines) or "json" (one JSON object per line).
+    std::string log_format = "text";
 };
+
+// True for addresses only this machine can reach: 127.0.0.0/8, ::1, localhost.
+bool is_loopback_address(const std::string& host_port);
 
 // Overlays the keys of a JSON object onto `base`. Keys are the long flag names without the
 // leading dashes ("max-scenes"); an unknown key, a wrong type or an out-of-range value is an

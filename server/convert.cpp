@@ -419,6 +419,16 @@ void encode_limits(const Limits& limits, v1::Limits* out) {
     out->set_max_frames_in_flight(limits.max_frames_in_flight);
 }
 
+void encode_quotas(const Quotas& quotas, v1::Quotas* out) {
+    out->set_max_scenes(quotas.max_scenes);
+    out->set_max_objects(quotas.max_objects);
+    out->set_max_triangles(quotas.max_triangles);
+    out->set_max_bytes_held(quotas.max_bytes_held);
+    out->set_max_bytes_in_flight(quotas.max_bytes_in_flight);
+    out->set_max_frames_per_second(quotas.max_frames_per_second);
+    out->set_max_streams(quotas.max_streams);
+}
+
 // --- Massive models ----------------------------------------------------------------------------
 
 StatusOr<massive::Affine> decode_transform(const v1::Transform& transform,

@@ -16,6 +16,7 @@
 
 #include <grpcpp/support/status.h>
 
+#include "auth.hpp"
 #include "config.hpp"
 #include "models.hpp"
 #include "proxima/ccd/frame_ccd.hpp"
@@ -72,6 +73,8 @@ void encode_object(const SceneObject& object, v1::ObjectInfo* out);
 void encode_scene(const std::string& scene_id, const std::string& name, const Scene& scene,
                   std::uint64_t frames, v1::SceneInfo* out);
 void encode_limits(const Limits& limits, v1::Limits* out);
+// A principal's quotas (0: unlimited).
+void encode_quotas(const Quotas& quotas, v1::Quotas* out);
 
 // --- Massive models ---
 

@@ -116,6 +116,43 @@ Status validate_update(const Scene& scene, const SceneUpdate& update, const Limi
     return {};
 }
 
+Holding holding_after(const Scene& scene, const SceneUpdate& update) {
+    std::uint64_t objects = scene.size();
+    std::uint64_t triangles = scene.triangle_count();
+    std::uint64_t vertices = 0;
+    for (const auto& obj : scene.objects()) {
+        vertices += obj.vertices.size();
+    }
+    auto drop = [&](ObjectId id) {
+        const auto index = scene.index_of(id);
+        if (index < 0) {
+            return;
+        }
+        const auto& obj = scene[static_cast<std::size_t>(index)];
+        objects -= 1;
+        triangles -= obj.triangle_count();
+        vertices -= obj.vertices.size();
+    };
+    auto add = [&](const NamedMesh& mesh) {
+        objects += 1;
+        triangles += mesh.mesh.triangles.size();
+        vertices += mesh.mesh.vertices.size();
+    };
+    for (const auto id : update.removals) {
+        drop(id);
+    }
+    for (const auto& r : update.replacements) {
+        drop(r.object);
+        for (const auto& f : r.fragments) {
+            add(f);
+        }
+    }
+    for (const auto& a : update.additions) {
+        add(a);
+    }
+    return {objects, triangles, scene_bytes(vertices, triangles)};
+}
+
 Status stopped_status(const CancelToken& cancel) {
     if (cancel.cancelled()) {
         return {StatusCode::cancelled, "cancelled by the caller"};
@@ -143,6 +180,11 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     if (Status s = validate_update(scene, decoded->update, limits, entry.id); !s.ok()) {
         return s;
     }
+    const Holding before_holding = entry.charged();
+    const Holding after_holding = holding_after(scene, decoded->update);
+    if (Status s = entry.charge(after_holding); !s.ok()) {
+        return s;
+    }
     // CCD interpolates each vertex between its two positions: the primitives must be the same at
     // both ends, so such a frame may only move vertices.
     std::optional<Scene> before;
@@ -161,6 +203,7 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     }
     auto changes = scene.apply(std::move(decoded->update));
     if (!changes.ok()) {
+        (void)entry.charge(before_holding);  // shrinking back cannot fail
         return changes.status();  // the engine's own all-or-nothing check: the scene is unchanged
     }
     ++entry.frames;
@@ -223,9 +266,15 @@ StatusOr<SceneUpdateResult> add_objects(SceneEntry& entry, std::vector<NamedMesh
     if (Status s = validate_update(scene, update, limits, entry.id, field); !s.ok()) {
         return s;
     }
+    const Holding before_holding = entry.charged();
+    if (Status s = entry.charge(holding_after(scene, update)); !s.ok()) {
+        return s;
+    }
     auto changes = scene.apply(std::move(update));
     if (changes.ok()) {
         entry.publish_sizes();
+    } else {
+        (void)entry.charge(before_holding);
     }
     return changes;
 }

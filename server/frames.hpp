@@ -25,6 +25,10 @@ Status validate_update(const Scene& scene, const SceneUpdate& update, const Limi
                        const std::string& scene_id,
                        const std::string& additions_field = "additions");
 
+// What the scene will hold once `update` (already validated) is applied, in the units of the
+// per-token quotas (auth.hpp).
+Holding holding_after(const Scene& scene, const SceneUpdate& update);
+
 // The status a stopped token reports, for work refused before it starts.
 Status stopped_status(const CancelToken& cancel);
 

@@ -28,7 +28,7 @@ int main(int argc, char** argv) {
         return *exit_code;
     }
     const auto& config = std::get<ServerConfig>(outcome);
-    configure_logging(config.log_level);
+    configure_logging(config.log_level, config.log_format);
 
     Daemon daemon(config);
     auto address = daemon.start();
@@ -38,6 +38,9 @@ int main(int argc, char** argv) {
     }
     // The contract with scripts and tests: the first line of standard output, flushed.
     std::printf("listening on %s\n", address.value().c_str());
+    if (!daemon.metrics_address().empty()) {
+        std::printf("metrics on %s\n", daemon.metrics_address().c_str());
+    }
     std::fflush(stdout);
 
     std::thread signal_thread([&] {

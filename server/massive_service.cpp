@@ -33,25 +33,6 @@ constexpr std::size_t VERIFY_MAX_PENDING_PAIRS = 256;
 // Prefetch streams of the shared cache: one per avatar, never reused, far from the small ids.
 std::atomic<std::uint64_t> g_next_avatar_id{1ull << 40};
 
-// One line per finished massive-model call, in the shape of log_call: `subject` is
-// "model=NAME" or "room=R model=M member=N".
-void log_massive(const char* method, const std::string& peer, const std::string& subject,
-                 Clock::time_point start, const Status& status, const std::string& extra = {}) {
-    const double ms = milliseconds_since(start);
-    if (status.ok()) {
-        spdlog::info("call method={} peer={} {} status=OK duration_ms={:.3f}{}", method, peer,
-                     subject, ms, extra);
-        return;
-    }
-    const auto level =
-        (status.code() == StatusCode::cancelled || status.code() == StatusCode::deadline_exceeded)
-            ? spdlog::level::info
-            : spdlog::level::warn;
-    spdlog::log(
-        level, "rejected method={} peer={} {} status={} duration_ms={:.3f}{} message=\"{}\"",
-        method, peer, subject, status_code_name(status.code()), ms, extra, status.message());
-}
-
 // VerifyModel. The traversal runs on a thread of its own (a large model takes minutes, and it
 // may wait for a slow reader: on the worker pool it would hold a thread that frames need). Pairs
 // go into a bounded queue (VERIFY_MAX_PENDING_PAIRS); when it is full the engine's on_pair waits,
@@ -74,6 +55,13 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
             std::lock_guard lock(m_mu);
             m_done = true;
             m_status = shutting_down();
+            write_next_locked();
+            return;
+        }
+        if (Status s = m_admission.admit(m_shared, *context); !s.ok()) {
+            std::lock_guard lock(m_mu);
+            m_done = true;
+            m_status = s;
             write_next_locked();
             return;
         }
@@ -115,11 +103,12 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
         if (m_generation) {
             subject += " generation=" + *m_generation;
         }
-        log_massive("VerifyModel", m_peer, subject, m_start, m_final,
-                    " tolerance=" + std::to_string(m_tolerance) + " pairs=" +
-                        std::to_string(m_pairs_found) + " edges=" + std::to_string(m_edges) +
-                        " reader_waits=" + std::to_string(m_reader_waits) +
-                        " events=" + std::to_string(m_events_written));
+        log_call(m_shared, "VerifyModel", m_admission.who(), m_peer, subject, m_start, m_final,
+                 " tolerance=" + std::to_string(m_tolerance) + " pairs=" +
+                     std::to_string(m_pairs_found) + " edges=" + std::to_string(m_edges) +
+                     " reader_waits=" + std::to_string(m_reader_waits) +
+                     " events=" + std::to_string(m_events_written),
+                 spdlog::level::info);
         delete this;
     }
 
@@ -131,7 +120,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
             if (Status t = check_tolerance(m_tolerance, "tolerance"); !t.ok()) {
                 return t;
             }
-            auto model = m_shared.models.find(m_model_name);
+            auto model = find_model(m_shared, *m_admission.principal(), m_model_name);
             if (!model.ok()) {
                 return model.status();
             }
@@ -141,9 +130,9 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
                 m_generation = store->summary().generation;
             }
             spdlog::info(
-                "verify start method=VerifyModel peer={} model={} generation={} "
+                "verify start method=VerifyModel who={} peer={} model={} generation={} "
                 "tolerance={} objects={} pieces={}",
-                m_peer, m_model_name, store->summary().generation, m_tolerance,
+                m_admission.who(), m_peer, m_model_name, store->summary().generation, m_tolerance,
                 store->summary().objects, store->summary().pieces);
             massive::VerifyOptions options;
             options.tolerance = m_tolerance;
@@ -254,6 +243,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
     std::uint64_t m_edges = 0;
     std::uint64_t m_reader_waits = 0;
     std::uint64_t m_events_written = 0;
+    StreamAdmission m_admission;
 };
 
 // Review: one member of a room. Requests are read while fewer than max_frames_in_flight are
@@ -276,6 +266,11 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
         std::lock_guard lock(m_member->mu);
         m_member->sink = this;
         m_draining = !accepted;
+        if (accepted) {
+            if (Status s = m_admission.admit(m_shared, *context); !s.ok()) {
+                m_error = s;
+            }
+        }
         start_read_if_room_locked();
         maybe_finish_locked();
     }
@@ -339,8 +334,9 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
         }
         leave_room();
         m_shared.leave_call(this);
-        log_massive("Review", m_peer, subject(), m_start, m_final,
-                    " poses=" + std::to_string(m_poses) + " edits=" + std::to_string(m_edits));
+        log_call(m_shared, "Review", m_admission.who(), m_peer, subject(), m_start, m_final,
+                 " poses=" + std::to_string(m_poses) + " edits=" + std::to_string(m_edits),
+                 spdlog::level::info);
         delete this;
     }
 
@@ -519,8 +515,14 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
         if (m_room) {
             return invalid_argument("a second join: a review stream joins one room, once");
         }
-        // Everything is checked before the room changes: the model, the avatar.
-        auto model = m_shared.models.find(join.model);
+        // Everything is checked before the room changes: access, the model, the avatar.
+        const auto& principal = *m_admission.principal();
+        if (!principal.may_join_room(join.room)) {
+            return {StatusCode::permission_denied, "token '" + principal.name() +
+                                                       "' may not join review room '" + join.room +
+                                                       "' (no pattern of its rooms matches)"};
+        }
+        auto model = find_model(m_shared, principal, join.model);
         if (!model.ok()) {
             return model.status();
         }
@@ -547,9 +549,9 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
         }
         m_tracker = std::move(tracker).value();
         spdlog::info(
-            "stream start method=Review peer={} room={} model={} generation={} "
+            "stream start method=Review who={} peer={} room={} model={} generation={} "
             "member={} tolerance={} nearest={}",
-            m_peer, m_room->name(), m_room->model().name,
+            m_admission.who(), m_peer, m_room->name(), m_room->model().name,
             m_room->model().store->summary().generation, m_member->name, m_options.tolerance,
             m_options.nearest);
         return {};
@@ -650,6 +652,8 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
     massive::AvatarQueryOptions m_options;
     std::uint64_t m_poses = 0;
     std::uint64_t m_edits = 0;
+    // Set once in the constructor, before any other callback can run.
+    StreamAdmission m_admission;
 };
 
 }  // namespace
@@ -669,12 +673,18 @@ grpc::ServerUnaryReactor* ProximityService::ListModels(grpc::CallbackServerConte
     m_shared->pool.submit([this, call, response] {
         std::string extra;
         call->complete(guarded([&]() -> Status {
+                           // Only the models this token may use: the others do not exist for it.
                            auto& models = m_shared->models;
+                           const auto& who = *call->principal();
                            for (const auto& m : models.list()) {
-                               encode_model(*m, response->add_models());
+                               if (who.may_use_model(m->name)) {
+                                   encode_model(*m, response->add_models());
+                               }
                            }
                            for (const auto& u : models.unavailable()) {
-                               encode_unavailable_model(u, response->add_unavailable());
+                               if (who.may_use_model(u.name)) {
+                                   encode_unavailable_model(u, response->add_unavailable());
+                               }
                            }
                            response->set_cache_budget_bytes(models.cache()->budget());
                            encode_cache_stats(models.cache()->stats(), response->mutable_cache());

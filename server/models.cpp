@@ -190,6 +190,10 @@ StatusOr<std::shared_ptr<const ModelEntry>> ModelRegistry::find(const std::strin
             return s;
         }
     }
+    return unknown_model(name);
+}
+
+Status ModelRegistry::unknown_model(const std::string& name) const {
     return not_found("no model named '" + name + "' in " + m_dir +
                      " (ListModels lists them; `proxima import` writes one)");
 }

@@ -53,6 +53,8 @@ class ModelRegistry {
     // be a subdirectory ("", "..", "a/b"), NOT_FOUND for no such store, the store's own status
     // (DATA_LOSS) when it exists but cannot be opened.
     StatusOr<std::shared_ptr<const ModelEntry>> find(const std::string& name);
+    // The NOT_FOUND of a model name this daemon does not serve.
+    Status unknown_model(const std::string& name) const;
 
     const std::shared_ptr<massive::GeometryCache>& cache() const { return m_cache; }
     const std::string& dir() const { return m_dir; }

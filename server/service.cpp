@@ -18,6 +18,7 @@
 #include "convert.hpp"
 #include "frames.hpp"
 #include "proxima/gpu/egl_backend.hpp"
+#include "proxima/gpu/failover_backend.hpp"
 #include "scene_registry.hpp"
 #include "service_internal.hpp"
 #include "worker_pool.hpp"
@@ -49,6 +50,10 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
           m_start(Clock::now()) {
         if (!m_shared.enter_call()) {
             complete(shutting_down());
+            return;
+        }
+        if (Status s = m_admission.admit(m_shared, *m_context); !s.ok()) {
+            complete(s);
             return;
         }
         StartRead(&m_chunk);
@@ -102,7 +107,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
         m_header = header;
         m_have_header = true;
         m_scene_id = header.scene_id();
-        auto entry = m_shared.scenes.find(m_scene_id);
+        auto entry = m_shared.scenes.find(m_scene_id, *m_admission.principal());
         if (!entry) {
             return unknown_scene(m_scene_id);
         }
@@ -159,6 +164,11 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
                                     std::to_string(expected) + " bytes); received at least " +
                                     std::to_string(buffer.size() + chunk.size()));
         }
+        // Buffered bytes are in flight until the object is added (or the upload fails).
+        if (Status s = m_admission.principal()->reserve_in_flight(chunk.size()); !s.ok()) {
+            return s;
+        }
+        m_in_flight_bytes += chunk.size();
         buffer += chunk;
         return {};
     }
@@ -193,7 +203,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
         if (!triangles.ok()) {
             return triangles.status();
         }
-        auto entry = m_shared.scenes.find(m_scene_id);
+        auto entry = m_shared.scenes.find(m_scene_id, *m_admission.principal());
         if (!entry) {
             return unknown_scene(m_scene_id);
         }
@@ -219,7 +229,12 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
 
     // Last thing done with this reactor: Finish lets gRPC run OnDone (which deletes it).
     void complete(const Status& status) {
-        log_call("UploadObject", m_peer, m_scene_id, m_start, status,
+        if (m_in_flight_bytes != 0) {
+            m_admission.principal()->release_in_flight(m_in_flight_bytes);
+            m_in_flight_bytes = 0;
+        }
+        log_call(m_shared, "UploadObject", m_admission.who(), m_peer, scene_subject(m_scene_id),
+                 m_start, status,
                  " bytes=" + std::to_string(m_vertex_bytes.size() + m_index_bytes.size()));
         Finish(to_grpc_status(status));
     }
@@ -237,6 +252,8 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
     std::uint64_t m_expected_index_bytes = 0;
     std::string m_vertex_bytes;
     std::string m_index_bytes;
+    StreamAdmission m_admission;
+    std::uint64_t m_in_flight_bytes = 0;  // of m_admission's principal
 };
 
 }  // namespace
@@ -258,6 +275,11 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
         const bool accepted = m_shared.enter_call(this);
         std::lock_guard lock(m_mu);
         m_draining = !accepted;
+        if (accepted) {
+            if (Status s = m_admission.admit(m_shared, *context); !s.ok()) {
+                m_error = s;
+            }
+        }
         start_read_if_room_locked();
         maybe_finish_locked();
     }
@@ -273,7 +295,16 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
         if (m_finished || stopped_locked()) {
             return;
         }
+        // A frame's bytes count against its principal's max-bytes-in-flight until it is answered.
+        const std::uint64_t bytes = m_incoming.ByteSizeLong();
+        if (Status s = m_admission.principal()->reserve_in_flight(bytes); !s.ok()) {
+            m_error = s;
+            drop_frames_locked();
+            maybe_finish_locked();
+            return;
+        }
         m_frames.push_back(std::move(m_incoming));
+        m_frame_bytes.push_back(bytes);
         m_incoming.Clear();
         ++m_in_flight;
         start_read_if_room_locked();
@@ -290,7 +321,7 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
             // The client is gone: stop the frame that may be running and drop the rest.
             m_write_failed = true;
             m_cancel.cancel();
-            m_frames.clear();
+            drop_frames_locked();
             maybe_finish_locked();
             return;
         }
@@ -308,12 +339,15 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
         std::lock_guard lock(m_mu);
         m_cancelled = true;
         m_cancel.cancel();
-        m_frames.clear();
+        drop_frames_locked();
         maybe_finish_locked();
     }
 
     void OnDone() override {
-        { std::lock_guard lock(m_mu); }  // the thread that called Finish has released m_mu
+        {
+            std::lock_guard lock(m_mu);  // the thread that called Finish has released m_mu
+            drop_frames_locked();
+        }
         // The scene goes before the stream count drops, so a client that sees live_streams back
         // to its old value also sees live_scenes back.
         const std::string scene_id = m_scene ? m_scene->id : "";
@@ -327,14 +361,8 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
         m_shared.leave_call(this);
         const std::string extra = " frames=" + std::to_string(m_frames_answered) +
                                   " owned_scene=" + (m_owns_scene ? "true" : "false");
-        if (m_final.ok()) {
-            spdlog::info(
-                "stream end method=StreamFrames peer={} scene={} status=OK "
-                "duration_ms={:.3f}{}",
-                m_peer, scene_id.empty() ? "-" : scene_id, milliseconds_since(m_start), extra);
-        } else {
-            log_call("StreamFrames", m_peer, scene_id, m_start, m_final, extra);
-        }
+        log_call(m_shared, "StreamFrames", m_admission.who(), m_peer, scene_subject(scene_id),
+                 m_start, m_final, extra, spdlog::level::info);
         delete this;
     }
 
@@ -347,6 +375,19 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
 
   private:
     bool stopped_locked() const { return m_cancelled || m_write_failed || m_error.has_value(); }
+
+    // Drops the frames read but not processed, giving their bytes back.
+    void drop_frames_locked() {
+        std::uint64_t bytes = 0;
+        for (const auto b : m_frame_bytes) {
+            bytes += b;
+        }
+        if (bytes != 0) {
+            m_admission.principal()->release_in_flight(bytes);
+        }
+        m_frames.clear();
+        m_frame_bytes.clear();
+    }
 
     void start_read_if_room_locked() {
         if (m_reading || m_read_done || m_finished || m_draining || stopped_locked() ||
@@ -382,6 +423,7 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
     void process() {
         for (;;) {
             v1::Frame frame;
+            std::uint64_t frame_bytes = 0;
             {
                 std::lock_guard lock(m_mu);
                 if (m_frames.empty() || stopped_locked()) {
@@ -391,15 +433,24 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
                 }
                 frame = std::move(m_frames.front());
                 m_frames.pop_front();
+                frame_bytes = m_frame_bytes.front();
+                m_frame_bytes.pop_front();
             }
             v1::FrameResult result;
-            Status s = guarded([&] { return handle(frame, &result); });
+            Status s = m_admission.principal()->admit_frame();
+            if (s.ok()) {
+                s = guarded([&] { return handle(frame, &result); });
+            }
+            m_admission.principal()->release_in_flight(frame_bytes);
+            if (s.ok()) {
+                m_shared.metrics.add_frames(1, result.stats().exact_tests());
+            }
             std::lock_guard lock(m_mu);
             if (!s.ok()) {
                 if (!m_error) {
                     m_error = s;
                 }
-                m_frames.clear();
+                drop_frames_locked();
                 m_processing = false;
                 maybe_finish_locked();
                 return;
@@ -425,30 +476,39 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
             }
             return run_frame(*m_scene, frame, limits, &m_cancel, out);
         }
+        const auto& principal = m_admission.principal();
         if (!frame.scene_id().empty()) {
-            auto entry = m_shared.scenes.find(frame.scene_id());
+            auto entry = m_shared.scenes.find(frame.scene_id(), *principal);
             if (!entry) {
                 return unknown_scene(frame.scene_id());
             }
             m_scene = entry;
-            spdlog::info("stream start method=StreamFrames peer={} scene={} owned_scene=false",
-                         m_peer, m_scene->id);
+            spdlog::info(
+                "stream start method=StreamFrames who={} peer={} scene={} owned_scene=false",
+                m_admission.who(), m_peer, m_scene->id);
             return run_frame(*m_scene, frame, limits, &m_cancel, out);
         }
         // An empty scene_id on the first frame: a scene owned by this stream, built from the
         // frame's additions, registered only once they are valid and applied.
+        if (!principal->may_create_scene("")) {
+            return {StatusCode::permission_denied,
+                    "token '" + principal->name() +
+                        "' may not create stream-owned scenes (their name is \"\"; its scenes "
+                        "patterns must match it, e.g. \"*\"); name a scene made by CreateScene"};
+        }
         if (Status s = m_shared.scenes.check_capacity(); !s.ok()) {
             return s;
         }
-        auto entry = m_shared.scenes.make_entry("", true);
+        auto entry = m_shared.scenes.make_entry("", true, principal);
         return run_frame(*entry, frame, limits, &m_cancel, out, [&]() -> Status {
             if (Status s = m_shared.scenes.insert(entry); !s.ok()) {
                 return s;
             }
             m_scene = entry;
             m_owns_scene = true;
-            spdlog::info("stream start method=StreamFrames peer={} scene={} owned_scene=true",
-                         m_peer, m_scene->id);
+            spdlog::info(
+                "stream start method=StreamFrames who={} peer={} scene={} owned_scene=true",
+                m_admission.who(), m_peer, m_scene->id);
             return {};
         });
     }
@@ -459,10 +519,11 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
     CancelToken m_cancel;  // deadline set before any task runs; cancel() is atomic
 
     std::mutex m_mu;
-    v1::Frame m_incoming;                   // target of the outstanding read
-    std::deque<v1::Frame> m_frames;         // read, not yet processed
-    std::deque<v1::FrameResult> m_results;  // answered, not yet written; front is being written
-    std::size_t m_in_flight = 0;            // read, result not yet written
+    v1::Frame m_incoming;                     // target of the outstanding read
+    std::deque<v1::Frame> m_frames;           // read, not yet processed
+    std::deque<std::uint64_t> m_frame_bytes;  // their sizes, in flight for the principal
+    std::deque<v1::FrameResult> m_results;    // answered, not yet written; front is being written
+    std::size_t m_in_flight = 0;              // read, result not yet written
     bool m_reading = false;
     bool m_read_done = false;
     bool m_writing = false;
@@ -477,6 +538,8 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
 
     std::shared_ptr<SceneEntry> m_scene;
     bool m_owns_scene = false;
+    // Set once in the constructor, before any other callback can run.
+    StreamAdmission m_admission;
 };
 
 ProximityService::ProximityService(const ServerConfig& config)
@@ -485,25 +548,49 @@ ProximityService::ProximityService(const ServerConfig& config)
     if (config.gpu != "off") {
         auto backend = gpu::make_egl_backend();
         if (backend.ok()) {
-            m_shared->gpu = std::move(backend).value();
             // name() is "gpu (<GL_RENDERER>)".
-            const auto name = m_shared->gpu->name();
+            const auto name = backend.value()->name();
             const auto open = name.find('(');
             m_shared->gl_renderer =
                 open == std::string::npos ? name : name.substr(open + 1, name.size() - open - 2);
             spdlog::info("gpu backend=egl gl_renderer=\"{}\"", m_shared->gl_renderer);
+            // A GPU job that fails (context lost, GL error) is re-run on the CPU kernel, and so is
+            // every later one: voronoi-gpu stays served, with the same answers.
+            m_shared->gpu = gpu::make_failover_backend(
+                std::move(backend).value(), dvd::make_cpu_backend(), [](const std::string& why) {
+                    spdlog::warn(
+                        "gpu lost backend=cpu reason=\"{}\" (voronoi-gpu now runs on the "
+                        "CPU kernel)",
+                        why);
+                });
         } else {
             reason = "EGL unavailable: " + backend.status().message();
             spdlog::warn("gpu backend=cpu reason=\"{}\" (the Voronoi culler runs on the CPU)",
                          reason);
         }
     }
+    if (!m_shared->gpu) {
+        m_shared->gpu_unavailable_reason = reason;
+    }
     m_shared->scenes.set_gpu(m_shared->gpu, reason);
 }
 
 std::string ProximityService::proximity_backend() const {
-    return m_shared->gpu ? "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)"
-                         : "cpu (voronoi-cpu, bvh, brute)";
+    if (!m_shared->gpu) {
+        return "cpu (voronoi-cpu, bvh, brute)";
+    }
+    const auto stats = m_shared->gpu->stats();
+    return stats.gpu_active ? "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)"
+                            : "cpu (voronoi-cpu, bvh, brute); gpu lost: " + stats.fallback_reason;
+}
+
+dvd::BackendStats ProximityService::gpu_stats() const {
+    if (m_shared->gpu) {
+        return m_shared->gpu->stats();
+    }
+    dvd::BackendStats none;
+    none.fallback_reason = m_shared->gpu_unavailable_reason;
+    return none;
 }
 
 std::string ProximityService::gl_renderer() const {
@@ -511,6 +598,129 @@ std::string ProximityService::gl_renderer() const {
 }
 
 ProximityService::~ProximityService() = default;
+
+void ProximityService::Shared::start_reaper() {
+    reaper = std::thread([this] {
+        const double idle = config.idle_scene_seconds;
+        // A scene outlives its idle time by at most a quarter of it (and at most a second).
+        const auto period = std::chrono::duration_cast<Clock::duration>(
+            std::chrono::duration<double>(std::clamp(idle / 4, 0.01, 1.0)));
+        std::unique_lock lock(reaper_mu);
+        while (!reaper_wake.wait_for(lock, period, [&] { return reaper_stop; })) {
+            lock.unlock();
+            auto expired = scenes.expire_idle(idle);
+            for (const auto& e : expired) {
+                spdlog::info("scene expired who={} scene={} idle_seconds={}", e->owner->log_name(),
+                             e->id, idle);
+                metrics.add_scene_expired();
+            }
+            expired.clear();  // frees the engines here, unless a call still holds one
+            lock.lock();
+        }
+    });
+}
+
+Status ProximityService::start() {
+    auto& shared = *m_shared;
+    if (!shared.config.tokens_file.empty()) {
+        auto auth = Authenticator::from_file(shared.config.tokens_file);
+        if (!auth.ok()) {
+            return auth.status();
+        }
+        shared.auth = std::move(auth).value();
+        spdlog::info("tokens file={} principals={}", shared.config.tokens_file,
+                     shared.auth->size());
+    } else if (!is_loopback_address(shared.config.listen)) {
+        spdlog::warn(
+            "no token file (--tokens): every client that reaches {} can use every scene, room "
+            "and model",
+            shared.config.listen);
+    }
+    shared.metrics.set_sampler([this](std::vector<Sample>& out) { sample_metrics(out); });
+    if (shared.config.idle_scene_seconds > 0) {
+        shared.start_reaper();
+    }
+    return start_models();
+}
+
+StatusOr<std::string> ProximityService::start_metrics(const std::string& address) {
+    return m_shared->metrics.listen(address);
+}
+
+std::string ProximityService::metrics_text() const {
+    return m_shared->metrics.render();
+}
+
+void ProximityService::sample_metrics(std::vector<Sample>& out) const {
+    auto& shared = *m_shared;
+    auto gauge = [&](const char* name, const char* help, double value,
+                     std::vector<std::pair<std::string, std::string>> labels = {}) {
+        out.push_back({name, help, false, std::move(labels), value});
+    };
+    auto counter = [&](const char* name, const char* help, double value,
+                       std::vector<std::pair<std::string, std::string>> labels = {}) {
+        out.push_back({name, help, true, std::move(labels), value});
+    };
+    gauge("proxima_live_scenes", "Scenes alive, stream-owned ones included",
+          static_cast<double>(live_scenes()));
+    gauge("proxima_live_streams", "Frame streams and review members connected",
+          static_cast<double>(live_streams()));
+    gauge("proxima_live_calls", "Calls in flight (streams, uploads, unary calls)",
+          static_cast<double>(live_calls()));
+
+    const auto gpu = gpu_stats();
+    gauge("proxima_gpu_active",
+          "1 while the GPU backend serves the Voronoi kernel, 0 without one or after a loss",
+          gpu.gpu_active ? 1 : 0);
+    counter("proxima_dvd_kernel_jobs_total", "Discrete-Voronoi kernel jobs by backend",
+            static_cast<double>(gpu.gpu_jobs), {{"backend", "gpu"}});
+    counter("proxima_dvd_kernel_jobs_total", "Discrete-Voronoi kernel jobs by backend",
+            static_cast<double>(gpu.cpu_jobs), {{"backend", "cpu"}});
+    counter("proxima_dvd_kernel_seconds_total", "Time in the discrete-Voronoi kernel by backend",
+            gpu.gpu_seconds, {{"backend", "gpu"}});
+    counter("proxima_dvd_kernel_seconds_total", "Time in the discrete-Voronoi kernel by backend",
+            gpu.cpu_seconds, {{"backend", "cpu"}});
+
+    if (const auto& cache = shared.models.cache()) {
+        const auto c = cache->stats();
+        gauge("proxima_cache_budget_bytes", "Budget of the shared geometry cache",
+              static_cast<double>(c.budget_bytes));
+        gauge("proxima_cache_resident_bytes", "Geometry and hierarchies resident in the cache",
+              static_cast<double>(c.resident_bytes));
+        counter("proxima_cache_hits_total", "Cache lookups that found the piece resident",
+                static_cast<double>(c.hits));
+        counter("proxima_cache_misses_total", "Cache lookups that had to load the piece",
+                static_cast<double>(c.misses));
+        counter("proxima_cache_loads_total", "Pieces read from disk (lookups and prefetch)",
+                static_cast<double>(c.loads));
+        counter("proxima_cache_bytes_loaded_total", "Piece bytes read from disk",
+                static_cast<double>(c.bytes_loaded));
+        counter("proxima_cache_evictions_total", "Pieces evicted from the cache",
+                static_cast<double>(c.evictions));
+    }
+
+    // Each principal's usage (one series per token; "-" when the daemon checks no tokens).
+    struct Usage {
+        const char* name;
+        const char* help;
+        std::uint64_t (Principal::*value)() const;
+    };
+    static const Usage USAGE[] = {
+        {"proxima_principal_scenes", "Live scenes of each token", &Principal::scenes},
+        {"proxima_principal_objects", "Objects in each token's scenes", &Principal::objects},
+        {"proxima_principal_triangles", "Triangles in each token's scenes", &Principal::triangles},
+        {"proxima_principal_bytes_held", "Geometry bytes of each token's scenes",
+         &Principal::bytes_held},
+        {"proxima_principal_bytes_in_flight", "Request bytes of each token read, not answered",
+         &Principal::bytes_in_flight},
+        {"proxima_principal_streams", "Streaming calls of each token", &Principal::streams}};
+    for (const auto& u : USAGE) {
+        for (const auto& p : shared.auth->principals()) {
+            gauge(u.name, u.help, static_cast<double>(((*p).*u.value)()),
+                  {{"principal", p->log_name()}});
+        }
+    }
+}
 
 std::size_t ProximityService::live_scenes() const {
     return m_shared->scenes.size();
@@ -552,8 +762,14 @@ grpc::ServerUnaryReactor* ProximityService::GetServerInfo(grpc::CallbackServerCo
     encode_limits(m_shared->config.limits, response->mutable_limits());
     response->set_proximity_backend(proximity_backend());
     response->set_gl_renderer(m_shared->gl_renderer);
+    const auto gpu_now = gpu_stats();
+    response->set_gpu_active(gpu_now.gpu_active);
+    response->set_gpu_fallback_reason(gpu_now.fallback_reason);
     response->set_live_scenes(live_scenes());
     response->set_live_streams(live_streams());
+    const auto& who = *call->principal();
+    response->set_principal(who.name());
+    encode_quotas(who.quotas(), response->mutable_quotas());
     call->complete({});
     return call;
 }
@@ -561,7 +777,7 @@ grpc::ServerUnaryReactor* ProximityService::GetServerInfo(grpc::CallbackServerCo
 grpc::ServerUnaryReactor* ProximityService::CreateScene(grpc::CallbackServerContext* context,
                                                         const v1::CreateSceneRequest* request,
                                                         v1::SceneInfo* response) {
-    auto* call = new UnaryCall(*m_shared, context, "CreateScene", "");
+    auto* call = new UnaryCall(*m_shared, context, "CreateScene", "", request->ByteSizeLong());
     if (call->refused()) {
         return call;
     }
@@ -569,6 +785,12 @@ grpc::ServerUnaryReactor* ProximityService::CreateScene(grpc::CallbackServerCont
         std::string extra;
         Status s = guarded([&]() -> Status {
             auto& shared = *m_shared;
+            const auto& principal = call->principal();
+            if (!principal->may_create_scene(request->name())) {
+                return {StatusCode::permission_denied,
+                        "token '" + principal->name() + "' may not create a scene named '" +
+                            request->name() + "' (no pattern of its scenes matches)"};
+            }
             if (Status full = shared.scenes.check_capacity(); !full.ok()) {
                 return full;
             }
@@ -576,7 +798,7 @@ grpc::ServerUnaryReactor* ProximityService::CreateScene(grpc::CallbackServerCont
             if (!meshes.ok()) {
                 return meshes.status();
             }
-            auto entry = shared.scenes.make_entry(request->name(), false);
+            auto entry = shared.scenes.make_entry(request->name(), false, principal);
             call->set_scene(entry->id);
             auto added =
                 add_objects(*entry, std::move(meshes).value(), shared.config.limits, "objects");
@@ -593,8 +815,8 @@ grpc::ServerUnaryReactor* ProximityService::CreateScene(grpc::CallbackServerCont
             return shared.scenes.insert(entry);
         });
         if (s.ok()) {
-            spdlog::info("scene created method=CreateScene scene={}{}", response->scene_id(),
-                         extra);
+            spdlog::info("scene created method=CreateScene who={} scene={}{}",
+                         call->principal()->log_name(), response->scene_id(), extra);
         }
         call->complete(s, extra);
     });
@@ -611,7 +833,7 @@ grpc::ServerUnaryReactor* ProximityService::DescribeScene(grpc::CallbackServerCo
     // Off the callback thread: it waits for the scene's mutex while a frame runs.
     m_shared->pool.submit([this, call, request, response] {
         call->complete(guarded([&]() -> Status {
-            auto entry = m_shared->scenes.find(request->scene_id());
+            auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
             if (!entry) {
                 return unknown_scene(request->scene_id());
             }
@@ -631,11 +853,12 @@ grpc::ServerUnaryReactor* ProximityService::DeleteScene(grpc::CallbackServerCont
         return call;
     }
     Status s;
-    auto entry = m_shared->scenes.find(request->scene_id());
+    auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
     if (!entry) {
         s = unknown_scene(request->scene_id());
     } else if (m_shared->scenes.erase(entry->id)) {
-        spdlog::info("scene deleted method=DeleteScene scene={}", entry->id);
+        spdlog::info("scene deleted method=DeleteScene who={} scene={}",
+                     call->principal()->log_name(), entry->id);
     } else {
         s = unknown_scene(request->scene_id());  // deleted by someone else meanwhile
     }
@@ -661,17 +884,26 @@ grpc::ServerBidiReactor<v1::Frame, v1::FrameResult>* ProximityService::StreamFra
 grpc::ServerUnaryReactor* ProximityService::Query(grpc::CallbackServerContext* context,
                                                   const v1::Frame* request,
                                                   v1::FrameResult* response) {
-    auto* call = new UnaryCall(*m_shared, context, "Query", request->scene_id());
+    auto* call =
+        new UnaryCall(*m_shared, context, "Query", request->scene_id(), request->ByteSizeLong());
     if (call->refused()) {
         return call;
     }
     m_shared->pool.submit([this, call, request, response] {
         call->complete(guarded([&]() -> Status {
-            auto entry = m_shared->scenes.find(request->scene_id());
+            if (Status s = call->principal()->admit_frame(); !s.ok()) {
+                return s;
+            }
+            auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
             if (!entry) {
                 return unknown_scene(request->scene_id());
             }
-            return run_frame(*entry, *request, m_shared->config.limits, &call->cancel(), response);
+            Status s =
+                run_frame(*entry, *request, m_shared->config.limits, &call->cancel(), response);
+            if (s.ok()) {
+                m_shared->metrics.add_frames(1, response->stats().exact_tests());
+            }
+            return s;
         }));
     });
     return call;

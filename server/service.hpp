@@ -7,10 +7,13 @@
 #include <chrono>
 #include <cstddef>
 #include <memory>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
 #include "config.hpp"
+#include "metrics.hpp"
+#include "proxima/culling/dvd.hpp"
 #include "proxima/status.hpp"
 #include "proxima/v1/proxima.grpc.pb.h"
 
@@ -49,9 +52,16 @@ class ProximityService final : public v1::Proximity::CallbackService {
     grpc::ServerBidiReactor<v1::ReviewRequest, v1::ReviewEvent>* Review(
         grpc::CallbackServerContext* context) override;
 
+    // Before the server starts: reads the token file, starts the idle-scene expiry, opens the
+    // models (start_models). The daemon refuses to start on an error.
+    Status start();
     // Opens the models under --models (before the server starts): unavailable when the
     // directory cannot be listed. A store that cannot be opened is logged and skipped.
     Status start_models();
+    // Serves the Prometheus endpoint on `address`; returns the address bound.
+    StatusOr<std::string> start_metrics(const std::string& address);
+    // The metrics as GET /metrics would return them (text format).
+    std::string metrics_text() const;
 
     // The first step of a graceful shutdown: new calls are refused with UNAVAILABLE, idle
     // streams are finished with UNAVAILABLE now, busy ones once the frames they already read are
@@ -69,10 +79,15 @@ class ProximityService final : public v1::Proximity::CallbackService {
     // "gpu (voronoi-gpu) + cpu (voronoi-cpu, bvh, brute)", and the GL renderer ("" without one).
     std::string proximity_backend() const;
     std::string gl_renderer() const;
+    // The GPU backend now, for metrics: active or why not (lost while serving, or never started),
+    // jobs and kernel seconds on the GPU and on the CPU in its place.
+    dvd::BackendStats gpu_stats() const;
 
     struct Shared;  // state the reactors share; defined in service.cpp
 
   private:
+    void sample_metrics(std::vector<Sample>& out) const;
+
     std::unique_ptr<Shared> m_shared;
 };
 

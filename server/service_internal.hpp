@@ -18,10 +18,13 @@
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
+#include "auth.hpp"
 #include "config.hpp"
 #include "convert.hpp"
+#include "metrics.hpp"
 #include "models.hpp"
 #include "proxima/culling/dvd.hpp"
+#include "proxima/gpu/failover_backend.hpp"
 #include "proxima/query/query.hpp"
 #include "rooms.hpp"
 #include "scene_registry.hpp"
@@ -52,11 +55,18 @@ struct ProximityService::Shared {
           pool(c.worker_threads != 0 ? c.worker_threads
                                      : std::max(4u, std::thread::hardware_concurrency())) {}
 
+    ~Shared() { stop_reaper(); }
+
     const ServerConfig config;
+    // Tokens (auth.hpp): the anonymous principal until start() reads the token file.
+    std::unique_ptr<Authenticator> auth = std::make_unique<Authenticator>();
+    Metrics metrics;
     SceneRegistry scenes;
     // The GPU backend of the Voronoi culler: one EGL context, owned by its own thread, shared by
-    // every scene (GPU jobs run one at a time). Null when EGL did not start or --gpu off.
-    std::shared_ptr<dvd::Backend> gpu;
+    // every scene (GPU jobs run one at a time), behind the failover to the CPU kernel on a context
+    // loss. Null when EGL did not start or --gpu off, with the reason.
+    std::shared_ptr<gpu::FailoverBackend> gpu;
+    std::string gpu_unavailable_reason;
     std::string gl_renderer;
     // Massive models (models.hpp) and review rooms (rooms.hpp).
     ModelRegistry models;
@@ -89,6 +99,24 @@ struct ProximityService::Shared {
     std::size_t calls = 0;                         // guarded by calls_mu
     std::unordered_set<DrainableStream*> streams;  // guarded by calls_mu: live streams
     bool draining = false;                         // guarded by calls_mu
+
+    // Idle-scene expiry: a thread that wakes a few times per idle-scene-seconds (at most once a
+    // second) and deletes scenes no call used for that long. Stopped by stop_reaper().
+    void start_reaper();
+    void stop_reaper() {
+        {
+            std::lock_guard lock(reaper_mu);
+            reaper_stop = true;
+        }
+        reaper_wake.notify_all();
+        if (reaper.joinable()) {
+            reaper.join();
+        }
+    }
+    std::mutex reaper_mu;
+    std::condition_variable reaper_wake;
+    bool reaper_stop = false;  // guarded by reaper_mu
+    std::thread reaper;
 
     // Last member, so it is destroyed first: its destructor runs queued tasks, which use the
     // members above.
@@ -125,26 +153,45 @@ Status guarded(Fn&& fn) {
     }
 }
 
-// One line per finished call. Rejections (the caller's mistake or a limit) are warnings; a
-// cancelled call or an expired deadline is the caller's choice, so it is info.
-inline void log_call(const char* method, const std::string& peer, const std::string& scene,
-                     Clock::time_point start, const Status& status, const std::string& extra = {}) {
+// The principal a call is made as, from its `authorization` metadata (UNAUTHENTICATED when the
+// daemon checks tokens and the call has none it knows).
+inline StatusOr<std::shared_ptr<Principal>> authenticate(
+    const ProximityService::Shared& shared, const grpc::CallbackServerContext& context) {
+    const auto& metadata = context.client_metadata();
+    const auto it = metadata.find("authorization");
+    return shared.auth->authenticate(
+        it == metadata.end() ? std::string() : std::string(it->second.data(), it->second.size()));
+}
+
+// One line per finished call, and its metrics. `who` is the principal's log name ("-" when
+// anonymous or unknown), `subject` what the call was about ("scene=ID", "model=M", ...).
+// Rejections (the caller's mistake or a limit) are warnings; a cancelled call or an expired
+// deadline is the caller's choice, so it is info; successes are `ok_level` (debug for the many
+// small calls, info for long, rare ones).
+inline void log_call(ProximityService::Shared& shared, const char* method, const std::string& who,
+                     const std::string& peer, const std::string& subject, Clock::time_point start,
+                     const Status& status, const std::string& extra = {},
+                     spdlog::level::level_enum ok_level = spdlog::level::debug) {
     const double ms = milliseconds_since(start);
+    shared.metrics.record_call(method, status, ms / 1000.0, who);
+    if (status.ok()) {
+        spdlog::log(ok_level, "call method={} who={} peer={} {} status=OK duration_ms={:.3f}{}",
+                    method, who, peer, subject, ms, extra);
+        return;
+    }
     const auto level =
-        status.ok() ? spdlog::level::debug
-        : (status.code() == StatusCode::cancelled || status.code() == StatusCode::deadline_exceeded)
+        (status.code() == StatusCode::cancelled || status.code() == StatusCode::deadline_exceeded)
             ? spdlog::level::info
             : spdlog::level::warn;
-    if (status.ok()) {
-        spdlog::log(level, "call method={} peer={} scene={} status=OK duration_ms={:.3f}{}", method,
-                    peer, scene.empty() ? "-" : scene, ms, extra);
-    } else {
-        spdlog::log(level,
-                    "rejected method={} peer={} scene={} status={} duration_ms={:.3f}{} "
-                    "message=\"{}\"",
-                    method, peer, scene.empty() ? "-" : scene, status_code_name(status.code()), ms,
-                    extra, status.message());
-    }
+    spdlog::log(level,
+                "rejected method={} who={} peer={} {} status={} duration_ms={:.3f}{} "
+                "message=\"{}\"",
+                method, who, peer, subject, status_code_name(status.code()), ms, extra,
+                status.message());
+}
+
+inline std::string scene_subject(const std::string& scene) {
+    return "scene=" + (scene.empty() ? std::string("-") : scene);
 }
 
 inline Status shutting_down() {
@@ -152,17 +199,71 @@ inline Status shutting_down() {
             "proximad is shutting down; reconnect (to another instance) to go on"};
 }
 
+// What a streaming call (StreamFrames, Review, VerifyModel, UploadObject) holds of its
+// principal: the call's place among the principal's max-streams, given back when the reactor is
+// deleted.
+class StreamAdmission {
+  public:
+    StreamAdmission() = default;
+    StreamAdmission(const StreamAdmission&) = delete;
+    StreamAdmission& operator=(const StreamAdmission&) = delete;
+    ~StreamAdmission() {
+        if (m_counted) {
+            m_principal->release_stream();
+        }
+    }
+
+    // UNAUTHENTICATED, or RESOURCE_EXHAUSTED at the quota max-streams.
+    Status admit(const ProximityService::Shared& shared,
+                 const grpc::CallbackServerContext& context) {
+        auto principal = authenticate(shared, context);
+        if (!principal.ok()) {
+            return principal.status();
+        }
+        m_principal = std::move(principal).value();
+        if (Status s = m_principal->reserve_stream(); !s.ok()) {
+            return s;
+        }
+        m_counted = true;
+        return {};
+    }
+
+    // Null until admit() authenticated the call.
+    const std::shared_ptr<Principal>& principal() const { return m_principal; }
+    const std::string& who() const {
+        static const std::string unknown = "-";
+        return m_principal ? m_principal->log_name() : unknown;
+    }
+
+  private:
+    std::shared_ptr<Principal> m_principal;
+    bool m_counted = false;
+};
+
+// A model the principal may use, with the same NOT_FOUND as an unknown name otherwise, so that
+// model names a token may not use do not leak.
+inline StatusOr<std::shared_ptr<const ModelEntry>> find_model(ProximityService::Shared& shared,
+                                                              const Principal& who,
+                                                              const std::string& name) {
+    if (!who.may_use_model(name)) {
+        return shared.models.unknown_model(name);
+    }
+    return shared.models.find(name);
+}
+
 // A unary call: the method fills the response on the worker pool (or inline when it is cheap)
 // and calls complete() last. The reactor deletes itself in OnDone, which gRPC may run as soon as
 // Finish is called, so nothing may touch it after complete().
 //
 // While the daemon drains, a new call is refused at once: the constructor completes it with
-// UNAVAILABLE and refused() tells the method to return without doing anything. (gRPC runs OnDone
-// only after the method has returned the reactor, so reading refused() is safe.)
+// UNAVAILABLE and refused() tells the method to return without doing anything; likewise a call
+// without a valid token (UNAUTHENTICATED) and one whose request would pass the principal's
+// max-bytes-in-flight (`request_bytes` are held for the call's duration). (gRPC runs OnDone only
+// after the method has returned the reactor, so reading refused() is safe.)
 class UnaryCall final : public grpc::ServerUnaryReactor {
   public:
     UnaryCall(ProximityService::Shared& shared, grpc::CallbackServerContext* context,
-              const char* method, std::string scene)
+              const char* method, std::string scene, std::uint64_t request_bytes = 0)
         : m_shared(shared),
           m_method(method),
           m_peer(context->peer()),
@@ -172,15 +273,36 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
         m_refused = !m_shared.enter_call();
         if (m_refused) {
             complete(shutting_down());
+            return;
         }
+        auto principal = authenticate(m_shared, *context);
+        if (!principal.ok()) {
+            m_refused = true;
+            complete(principal.status());
+            return;
+        }
+        m_principal = std::move(principal).value();
+        if (Status s = m_principal->reserve_in_flight(request_bytes); !s.ok()) {
+            m_refused = true;
+            complete(s);
+            return;
+        }
+        m_in_flight_bytes = request_bytes;
     }
 
     bool refused() const { return m_refused; }
     const CancelToken& cancel() const { return m_cancel; }
+    // Null only when refused().
+    const std::shared_ptr<Principal>& principal() const { return m_principal; }
     void set_scene(std::string scene) { m_scene = std::move(scene); }
 
     void complete(const Status& status, const std::string& extra = {}) {
-        log_call(m_method, m_peer, m_scene, m_start, status, extra);
+        if (m_principal) {
+            m_principal->release_in_flight(m_in_flight_bytes);
+            m_in_flight_bytes = 0;
+        }
+        log_call(m_shared, m_method, m_principal ? m_principal->log_name() : "-", m_peer,
+                 scene_subject(m_scene), m_start, status, extra);
         Finish(to_grpc_status(status));
     }
 
@@ -198,6 +320,8 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
     std::string m_scene;
     Clock::time_point m_start;
     CancelToken m_cancel;
+    std::shared_ptr<Principal> m_principal;
+    std::uint64_t m_in_flight_bytes = 0;
 };
 
 }  // namespace proxima::server

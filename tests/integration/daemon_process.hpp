@@ -113,16 +113,25 @@ class DaemonProcess {
 
     bool running() { return m_pid > 0 && !wait_exit(std::chrono::milliseconds(0)).has_value(); }
 
-  private:
-    void read_first_line(std::chrono::milliseconds timeout) {
-        const auto until = std::chrono::steady_clock::now() + timeout;
+    // The next line of the daemon's standard output (e.g. `metrics on HOST:PORT`, the second
+    // line with --metrics-listen), or nullopt when none comes within `timeout`.
+    std::optional<std::string> next_line(std::chrono::milliseconds timeout) {
         std::string line;
+        if (!read_line(timeout, line)) {
+            return std::nullopt;
+        }
+        return line;
+    }
+
+  private:
+    // One line without its newline; false (with what came so far in `line`) on timeout or EOF.
+    bool read_line(std::chrono::milliseconds timeout, std::string& line) {
+        const auto until = std::chrono::steady_clock::now() + timeout;
         for (;;) {
             const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
                 until - std::chrono::steady_clock::now());
             if (left.count() <= 0) {
-                m_error = "no `listening on` line within the timeout; got '" + line + "'";
-                return;
+                return false;
             }
             pollfd p{m_stdout, POLLIN, 0};
             if (poll(&p, 1, static_cast<int>(left.count())) <= 0) {
@@ -131,14 +140,23 @@ class DaemonProcess {
             char c = 0;
             const ssize_t n = read(m_stdout, &c, 1);
             if (n <= 0) {
-                m_error = "proximad closed its standard output before a full first line; got '" +
-                          line + "'";
-                return;
+                return false;
             }
             if (c == '\n') {
-                break;
+                return true;
             }
             line += c;
+        }
+    }
+
+    void read_first_line(std::chrono::milliseconds timeout) {
+        std::string line;
+        if (!read_line(timeout, line)) {
+            m_error =
+                "no full `listening on` line within the timeout (or standard output closed); "
+                "got '" +
+                line + "'";
+            return;
         }
         m_first_line = line;
         const std::string prefix = "listening on 127.0.0.1:";
