@@ -153,7 +153,11 @@ void Metrics::record_call(const std::string& method, const Status& status, doubl
     m_impl->requests.Add({{"method", method}, {"code", code}}).Increment();
     m_impl->latency.Add({{"method", method}, {"code", code}}, LATENCY_BUCKETS).Observe(seconds);
     if (status.code() == StatusCode::resource_exhausted) {
-        if (auto quota = word_after(status.message(), "quota "); !quota.empty()) {
+        // Quota statuses start with "quota NAME of token" (auth.cpp); anything else that
+        // mentions a quota (a full disk's "quota exceeded") is not one of ours.
+        const bool quota_status = status.message().rfind("quota ", 0) == 0;
+        if (auto quota = quota_status ? word_after(status.message(), "quota ") : std::string();
+            !quota.empty()) {
             m_impl->quota_rejections.Add({{"quota", quota}, {"principal", principal}}).Increment();
         } else if (auto limit = word_after(status.message(), "the limit "); !limit.empty()) {
             m_impl->limit_rejections.Add({{"limit", limit}}).Increment();
