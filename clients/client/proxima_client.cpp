@@ -224,10 +224,33 @@ StatusOr<std::string> read_token_file(const std::string& path, std::string* warn
 struct Client::Impl {
     std::string address;
     ConnectOptions options;
+    std::shared_ptr<grpc::ChannelCredentials> credentials;
+    grpc::ChannelArguments channel_args;
+    // The channel is replaced when a connection attempt must be made from scratch (below);
+    // calls take a reference under the lock, so one in flight keeps its channel alive.
+    std::mutex channel_mu;
     std::shared_ptr<grpc::Channel> channel;
-    std::unique_ptr<pb::Proximity::Stub> stub;
+    std::shared_ptr<pb::Proximity::Stub> stub;
     std::mutex rng_mu;
     std::mt19937_64 rng{std::random_device{}()};
+
+    void new_channel() {
+        auto fresh = grpc::CreateCustomChannel(address, credentials, channel_args);
+        auto fresh_stub = std::shared_ptr<pb::Proximity::Stub>(pb::Proximity::NewStub(fresh));
+        std::lock_guard lock(channel_mu);
+        channel = std::move(fresh);
+        stub = std::move(fresh_stub);
+    }
+
+    std::shared_ptr<pb::Proximity::Stub> stub_now() {
+        std::lock_guard lock(channel_mu);
+        return stub;
+    }
+
+    std::shared_ptr<grpc::Channel> channel_now() {
+        std::lock_guard lock(channel_mu);
+        return channel;
+    }
 
     // Deadline (unary calls only: a stream lives as long as its caller wants) and the token.
     void prepare(grpc::ClientContext& context, bool unary = true) const {
@@ -239,17 +262,22 @@ struct Client::Impl {
         }
     }
 
-    // One connection attempt: ok once the channel is READY; unavailable when an attempt made
-    // while we waited ended in TRANSIENT_FAILURE (refused, reset, a failed TLS handshake), or
-    // at the deadline. The channel's own reconnect backoff is reset first, so that each of our
-    // attempts really dials instead of waiting out gRPC's schedule.
+    // One connection attempt: ok once the channel is READY; unavailable when the attempt ended
+    // in TRANSIENT_FAILURE (refused, reset, a failed TLS handshake) or at the deadline.
+    // A channel in TRANSIENT_FAILURE stays there ("sticky") until it is READY, so a failed retry
+    // of gRPC's own could not be seen on it, and its reconnect schedule is gRPC's: such a channel
+    // is replaced by a fresh one (its own subchannel pool, see connect()), whose single attempt
+    // goes IDLE -> CONNECTING -> READY or TRANSIENT_FAILURE where we can watch it.
     Status ensure_connected(std::chrono::milliseconds timeout) {
-        auto state = channel->GetState(true);
+        auto current = channel_now();
+        auto state = current->GetState(true);
         if (state == GRPC_CHANNEL_READY) {
             return {};
         }
-        if (state == GRPC_CHANNEL_TRANSIENT_FAILURE) {
-            grpc::experimental::ChannelResetConnectionBackoff(channel.get());
+        if (state == GRPC_CHANNEL_TRANSIENT_FAILURE || state == GRPC_CHANNEL_SHUTDOWN) {
+            new_channel();
+            current = channel_now();
+            state = current->GetState(true);
         }
         const auto deadline = deadline_after(timeout);
         bool attempted = state == GRPC_CHANNEL_CONNECTING;
@@ -257,20 +285,17 @@ struct Client::Impl {
             if (state == GRPC_CHANNEL_READY) {
                 return {};
             }
-            if (state == GRPC_CHANNEL_SHUTDOWN) {
-                return {StatusCode::unavailable, "the channel to " + address + " is shut down"};
-            }
-            if (state == GRPC_CHANNEL_TRANSIENT_FAILURE && attempted) {
+            if ((state == GRPC_CHANNEL_TRANSIENT_FAILURE && attempted) ||
+                state == GRPC_CHANNEL_SHUTDOWN) {
                 return {StatusCode::unavailable, unreachable("the connection attempt failed")};
             }
-            if (!channel->WaitForStateChange(state, deadline)) {
+            if (!current->WaitForStateChange(state, deadline)) {
                 return {StatusCode::unavailable,
-                        unreachable("no connection within " +
-                                    milliseconds_text(options.connect_timeout))};
+                        unreachable("no connection within " + milliseconds_text(timeout))};
             }
             // Whatever we see next, the channel went through a connection attempt.
             attempted = true;
-            state = channel->GetState(true);
+            state = current->GetState(true);
         }
     }
 
@@ -413,8 +438,8 @@ StatusOr<std::unique_ptr<Client>> Client::connect(const std::string& address,
     args.SetMaxReceiveMessageSize(-1);
     args.SetMaxSendMessageSize(-1);
     // gRPC's own reconnect schedule (1 s, growing to 120 s) would leave a restarted daemon
-    // unseen for long; ours is the one that counts (ensure_connected resets gRPC's between our
-    // attempts), so gRPC's is kept within the same bounds.
+    // unseen for long where a channel reconnects by itself (after a READY connection dropped);
+    // ours is the one that counts (ensure_connected), so gRPC's is kept within the same bounds.
     const auto initial = std::max<std::int64_t>(options.retry.initial_backoff.count(), 1);
     args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(initial));
     args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(initial));
@@ -437,11 +462,15 @@ StatusOr<std::unique_ptr<Client>> Client::connect(const std::string& address,
     } else {
         credentials = grpc::InsecureChannelCredentials();
     }
+    // Each channel its own subchannels: a replacement channel (ensure_connected) must dial
+    // afresh, not inherit a failed subchannel and its backoff from the process-wide pool.
+    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
     auto impl = std::make_unique<Impl>();
     impl->address = address;
     impl->options = std::move(options);
-    impl->channel = grpc::CreateCustomChannel(address, credentials, args);
-    impl->stub = pb::Proximity::NewStub(impl->channel);
+    impl->credentials = std::move(credentials);
+    impl->channel_args = args;
+    impl->new_channel();
     // Connecting is always safe to repeat.
     if (auto st = impl->with_retries(impl->options.retry, "connect", Retry::idempotent,
                                      [] { return Status(); });
@@ -455,7 +484,7 @@ StatusOr<RemoteServerInfo> Client::server_info() {
     pb::ServerInfo info;
     if (auto st = m_impl->unary("GetServerInfo", Retry::idempotent,
                                 [&](grpc::ClientContext& context) {
-                                    return m_impl->stub->GetServerInfo(
+                                    return m_impl->stub_now()->GetServerInfo(
                                         &context, pb::GetServerInfoRequest(), &info);
                                 });
         !st.ok()) {
@@ -487,7 +516,8 @@ StatusOr<RemoteScene> Client::create_scene(const std::string& name,
     pb::SceneInfo info;
     if (auto st = m_impl->unary("CreateScene", Retry::unsent_only,
                                 [&](grpc::ClientContext& context) {
-                                    return m_impl->stub->CreateScene(&context, request, &info);
+                                    return m_impl->stub_now()->CreateScene(&context, request,
+                                                                           &info);
                                 });
         !st.ok()) {
         return st;
@@ -512,7 +542,8 @@ StatusOr<RemoteScene> Client::describe_scene(const std::string& scene_id) {
     pb::SceneInfo info;
     if (auto st = m_impl->unary("DescribeScene", Retry::idempotent,
                                 [&](grpc::ClientContext& context) {
-                                    return m_impl->stub->DescribeScene(&context, request, &info);
+                                    return m_impl->stub_now()->DescribeScene(&context, request,
+                                                                             &info);
                                 });
         !st.ok()) {
         return st;
@@ -530,7 +561,7 @@ Status Client::delete_scene(const std::string& scene_id) {
     int attempts = 0;
     Status st = m_impl->unary("DeleteScene", Retry::idempotent, [&](grpc::ClientContext& context) {
         ++attempts;
-        return m_impl->stub->DeleteScene(&context, request, &response);
+        return m_impl->stub_now()->DeleteScene(&context, request, &response);
     });
     if (st.code() == StatusCode::not_found && attempts > 1) {
         return {};
@@ -568,7 +599,7 @@ Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedM
     grpc::ClientContext context;
     impl->prepare(context);
     pb::ObjectInfo& info = *info_out;
-    auto writer = impl->stub->UploadObject(&context, &info);
+    auto writer = impl->stub_now()->UploadObject(&context, &info);
 
     // A failed write means the server has ended the call: stop sending, Finish says why.
     bool open = true;
@@ -619,7 +650,7 @@ StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRe
     pb::FrameResult result;
     if (auto st = m_impl->unary("Query", repeatable ? Retry::idempotent : Retry::unsent_only,
                                 [&](grpc::ClientContext& context) {
-                                    return m_impl->stub->Query(&context, request, &result);
+                                    return m_impl->stub_now()->Query(&context, request, &result);
                                 });
         !st.ok()) {
         return st;
@@ -642,7 +673,7 @@ StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& sc
     // No deadline: a stream lives as long as the simulation. The call starts lazily; a daemon
     // that refuses it (unknown scene, too many streams) answers on the first receive().
     m_impl->prepare(impl->context, false);
-    impl->stream = m_impl->stub->StreamFrames(&impl->context);
+    impl->stream = m_impl->stub_now()->StreamFrames(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a frame stream");
     }
@@ -734,7 +765,7 @@ StatusOr<RemoteModelList> Client::list_models() {
     pb::ListModelsResponse response;
     if (auto st = m_impl->unary("ListModels", Retry::idempotent,
                                 [&](grpc::ClientContext& context) {
-                                    return m_impl->stub->ListModels(
+                                    return m_impl->stub_now()->ListModels(
                                         &context, pb::ListModelsRequest(), &response);
                                 });
         !st.ok()) {
@@ -762,7 +793,7 @@ StatusOr<RemoteVerifySummary> Client::verify_model(
             if (timeout.count() > 0) {
                 context.set_deadline(deadline_after(timeout));
             }
-            auto reader = m_impl->stub->VerifyModel(&context, request);
+            auto reader = m_impl->stub_now()->VerifyModel(&context, request);
             pb::VerifyModelEvent event;
             while (reader->Read(&event)) {
                 if (stopped) {
@@ -890,7 +921,7 @@ StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& j
         return st;
     }
     m_impl->prepare(impl->context, false);
-    impl->stream = m_impl->stub->Review(&impl->context);
+    impl->stream = m_impl->stub_now()->Review(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a review stream");
     }
@@ -1264,7 +1295,7 @@ struct ResilientScene::Impl {
                 pb::DeleteSceneRequest request;
                 request.set_scene_id(scene_id);
                 pb::DeleteSceneResponse response;
-                const auto st = from_grpc(c.stub->DeleteScene(&context, request, &response));
+                const auto st = from_grpc(c.stub_now()->DeleteScene(&context, request, &response));
                 if (st.code() == StatusCode::unavailable) {
                     return st;
                 }
@@ -1380,7 +1411,7 @@ ResilientScene::~ResilientScene() {
         pb::DeleteSceneRequest request;
         request.set_scene_id(m_impl->scene_id);
         pb::DeleteSceneResponse response;
-        (void)c.stub->DeleteScene(&context, request, &response);
+        (void)c.stub_now()->DeleteScene(&context, request, &response);
     }
 }
 

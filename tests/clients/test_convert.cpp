@@ -392,6 +392,8 @@ TEST(ClientConvert, StatusCodesMapByName) {
         {grpc::StatusCode::UNAVAILABLE, StatusCode::unavailable},
         {grpc::StatusCode::INTERNAL, StatusCode::internal},
         {grpc::StatusCode::DATA_LOSS, StatusCode::data_loss},  // a corrupt massive-model chunk
+        {grpc::StatusCode::UNAUTHENTICATED, StatusCode::unauthenticated},  // tokens (issue #7)
+        {grpc::StatusCode::PERMISSION_DENIED, StatusCode::permission_denied},
     };
     for (const auto& c : named) {
         const auto st = detail::from_grpc({c.grpc, "object 'a.off': triangle 3 index 9"});
@@ -409,18 +411,27 @@ TEST(ClientConvert, StatusCodesMapByName) {
     const std::pair<grpc::StatusCode, const char*> unnamed[] = {
         {grpc::StatusCode::UNKNOWN, "UNKNOWN"},
         {grpc::StatusCode::ALREADY_EXISTS, "ALREADY_EXISTS"},
-        {grpc::StatusCode::PERMISSION_DENIED, "PERMISSION_DENIED"},
         {grpc::StatusCode::ABORTED, "ABORTED"},
         {grpc::StatusCode::OUT_OF_RANGE, "OUT_OF_RANGE"},
         {grpc::StatusCode::UNIMPLEMENTED, "UNIMPLEMENTED"},
-        {grpc::StatusCode::UNAUTHENTICATED, "UNAUTHENTICATED"},
         {static_cast<grpc::StatusCode>(20), "UNKNOWN"},  // a code from a newer gRPC
     };
     for (const auto& [code, name] : unnamed) {
         const auto st = detail::from_grpc({code, "why"});
         EXPECT_EQ(st.code(), StatusCode::internal);
         EXPECT_EQ(st.message(), std::string("gRPC ") + name + ": why");
+        // What the command line prints: the gRPC name, not INTERNAL.
+        EXPECT_EQ(grpc_code_name(st), name);
+        EXPECT_EQ(describe_status(st), std::string(name) + ": why");
     }
+    // Named codes print as Status::to_string does; a message that merely looks like the prefix
+    // under another code is left alone.
+    const auto named_st = detail::from_grpc({grpc::StatusCode::UNAUTHENTICATED, "no token"});
+    EXPECT_EQ(grpc_code_name(named_st), "UNAUTHENTICATED");
+    EXPECT_EQ(describe_status(named_st), "UNAUTHENTICATED: no token");
+    const Status lookalike(StatusCode::not_found, "gRPC ABORTED: x");
+    EXPECT_EQ(grpc_code_name(lookalike), "NOT_FOUND");
+    EXPECT_EQ(describe_status(lookalike), "NOT_FOUND: gRPC ABORTED: x");
 }
 
 TEST(ClientConvert, InfoMessagesDecodeEveryField) {
@@ -435,7 +446,26 @@ TEST(ClientConvert, InfoMessagesDecodeEveryField) {
     info.mutable_limits()->set_max_triangles_per_scene(5000000);
     info.mutable_limits()->set_max_message_bytes(64 << 20);
     info.mutable_limits()->set_max_frames_in_flight(4);
+    info.set_principal("simulator-7");
+    info.mutable_quotas()->set_max_scenes(2);
+    info.mutable_quotas()->set_max_objects(30);
+    info.mutable_quotas()->set_max_triangles(4000);
+    info.mutable_quotas()->set_max_bytes_held(1 << 20);
+    info.mutable_quotas()->set_max_bytes_in_flight(1 << 16);
+    info.mutable_quotas()->set_max_frames_per_second(60.5);
+    info.mutable_quotas()->set_max_streams(3);
+    info.set_gpu_fallback_reason("EGL context lost");
     const auto i = detail::decode_server_info(reparse(info));
+    EXPECT_EQ(i.principal, "simulator-7");
+    EXPECT_EQ(i.quota_max_scenes, 2u);
+    EXPECT_EQ(i.quota_max_objects, 30u);
+    EXPECT_EQ(i.quota_max_triangles, 4000u);
+    EXPECT_EQ(i.quota_max_bytes_held, 1u << 20);
+    EXPECT_EQ(i.quota_max_bytes_in_flight, 1u << 16);
+    EXPECT_EQ(i.quota_max_frames_per_second, 60.5);
+    EXPECT_EQ(i.quota_max_streams, 3u);
+    EXPECT_FALSE(i.gpu_active);
+    EXPECT_EQ(i.gpu_fallback_reason, "EGL context lost");
     EXPECT_EQ(i.version, "0.1.0");
     EXPECT_EQ(i.api, "proxima.v1");
     EXPECT_EQ(i.proximity_backend, "cpu: brute, bvh");
