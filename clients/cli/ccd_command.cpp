@@ -27,6 +27,7 @@ namespace {
 struct CcdArgs {
     bool local = false;
     std::string server;
+    ServerFlags server_flags;
     bool split_components = false;
     double min_distance = 0.0;
     bool json = false;
@@ -182,9 +183,9 @@ StatusOr<ccd::CcdResult> ccd_local(const Frames& frames, const ccd::CcdRequest& 
 
 // On the daemon: a scene with the T0 objects (in input order, so indices mean the same as
 // locally), one CCD frame moving every object to its T1 positions, then the scene is deleted.
-StatusOr<ccd::CcdResult> ccd_remote(const std::string& address, const Frames& frames,
+StatusOr<ccd::CcdResult> ccd_remote(const CcdArgs& args, const Frames& frames,
                                     const ccd::CcdRequest& request) {
-    auto c = client::Client::connect(address);
+    auto c = connect_server(args.server, args.server_flags);
     if (!c.ok()) {
         return c.status();
     }
@@ -216,7 +217,7 @@ int run_ccd(const CcdArgs& args) {
     ccd::CcdRequest request;
     request.elementary.min_distance = args.min_distance;
     auto result = args.server.empty() ? ccd_local(frames.value(), request)
-                                      : ccd_remote(args.server, frames.value(), request);
+                                      : ccd_remote(args, frames.value(), request);
     if (!result.ok()) {
         return fail(result.status());
     }
@@ -237,6 +238,7 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
     auto* server_opt = cmd->add_option("--server", args->server,
                                        "Run on the proximad daemon at HOST:PORT instead");
     server_opt->excludes(local_flag);
+    add_server_flags(*cmd, args->server_flags, server_opt);
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
     cmd->add_option("--min-distance", args->min_distance,

@@ -10,7 +10,7 @@
 namespace proxima::cli {
 
 int fail(const Status& status) {
-    std::fprintf(stderr, "proxima: error: %s\n", status.to_string().c_str());
+    std::fprintf(stderr, "proxima: error: %s\n", client::describe_status(status).c_str());
     return 1;
 }
 

@@ -3,6 +3,7 @@
 // the user named, its callback runs it during parsing and stores the exit status in `exit_code`.
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -29,8 +30,31 @@ void add_generate_command(CLI::App& app, int& exit_code);
 void add_massive_commands(CLI::App& app, int& exit_code);
 
 // Prints "proxima: error: CODE: message" on standard error and returns exit status 1
-// (clients/cli/cli_util.cpp).
+// (clients/cli/cli_util.cpp). CODE is the gRPC name, also for codes the engine has no name for
+// ("UNAUTHENTICATED: ...", not "INTERNAL: gRPC UNAUTHENTICATED: ...").
 int fail(const Status& status);
+
+// How every subcommand that talks to a daemon authenticates and secures the connection
+// (clients/cli/server_flags.cpp): --token-file FILE (else the environment's PROXIMA_TOKEN),
+// --tls-ca FILE, --tls-cert FILE, --tls-key FILE, --tls-server-name NAME.
+struct ServerFlags {
+    std::string token_file;
+    std::string tls_ca;
+    std::string tls_cert;
+    std::string tls_key;
+    std::string tls_server_name;
+};
+// Adds the flags to `cmd`; with `server` set they need it (they mean nothing locally).
+void add_server_flags(CLI::App& cmd, ServerFlags& flags, CLI::Option* server = nullptr);
+// ConnectOptions from the flags: the token (from the file, else PROXIMA_TOKEN; a token file
+// readable by every user is a warning on standard error) and TLS when any --tls-* flag is given.
+// Errors name the flag's file.
+StatusOr<client::ConnectOptions> connect_options(const ServerFlags& flags,
+                                                 client::ConnectOptions base = {});
+// connect_options, then Client::connect.
+StatusOr<std::unique_ptr<client::Client>> connect_server(const std::string& address,
+                                                         const ServerFlags& flags,
+                                                         client::ConnectOptions base = {});
 // "16M" -> 16 * base^2: sizes with an optional K, M, G or T suffix ("MB", "MiB" and a bare "B"
 // accepted), base 1024 for bytes, 1000 for counts; "1.5G", "4096" too. INVALID_ARGUMENT naming
 // `option` for anything else, and for a result below 1 or above 1.8e19.

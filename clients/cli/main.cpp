@@ -34,16 +34,18 @@ double milliseconds_since(std::chrono::steady_clock::time_point start) {
 }
 
 StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address,
+                                                  const cli::ServerFlags& flags,
                                                   std::size_t inline_mesh_bytes = 1u << 20) {
     client::ConnectOptions options;
     // float64 vertices (the default) keep server answers bit-identical to local ones.
     options.inline_mesh_bytes = inline_mesh_bytes;
-    return client::Client::connect(address, options);
+    return cli::connect_server(address, flags, options);
 }
 
 struct DistanceArgs {
     bool local = false;
     std::string server;
+    cli::ServerFlags server_flags;
     std::size_t inline_mesh_bytes = 1u << 20;
     bool split_components = false;
     bool self = false;
@@ -214,7 +216,7 @@ Status check_remote_result(const std::vector<client::InputObject>& objects,
 StatusOr<DistanceAnswer> query_remote(const DistanceArgs& args,
                                       const std::vector<client::InputObject>& objects,
                                       const QueryRequest& request) {
-    auto remote = connect(args.server, args.inline_mesh_bytes);
+    auto remote = connect(args.server, args.server_flags, args.inline_mesh_bytes);
     if (!remote.ok()) {
         return remote.status();
     }
@@ -278,6 +280,7 @@ struct DemoArgs {
     bool json = false;
     std::string culler = "auto";
     std::string server;
+    cli::ServerFlags server_flags;
 };
 
 // One demo frame's line. `round_trip_ms` is set in server mode only (send to result received).
@@ -453,7 +456,7 @@ class IdMap {
 // creates it from its additions and the daemon deletes it when the stream ends.
 int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
                     const QueryRequest& request) {
-    auto remote = connect(args.server);
+    auto remote = connect(args.server, args.server_flags);
     if (!remote.ok()) {
         return fail(remote.status());
     }
@@ -531,11 +534,12 @@ int run_demo(const DemoArgs& args) {
 
 struct InfoArgs {
     std::string server;
+    cli::ServerFlags server_flags;
     bool json = false;
 };
 
 int run_info(const InfoArgs& args) {
-    auto remote = connect(args.server);
+    auto remote = connect(args.server, args.server_flags);
     if (!remote.ok()) {
         return fail(remote.status());
     }
@@ -557,7 +561,16 @@ int run_info(const InfoArgs& args) {
                               {"max_objects_per_scene", i.max_objects_per_scene},
                               {"max_triangles_per_scene", i.max_triangles_per_scene},
                               {"max_message_bytes", i.max_message_bytes},
-                              {"max_frames_in_flight", i.max_frames_in_flight}}}};
+                              {"max_frames_in_flight", i.max_frames_in_flight}}},
+                            {"principal", i.principal},
+                            {"quotas",
+                             {{"max_scenes", i.quota_max_scenes},
+                              {"max_objects", i.quota_max_objects},
+                              {"max_triangles", i.quota_max_triangles},
+                              {"max_bytes_held", i.quota_max_bytes_held},
+                              {"max_bytes_in_flight", i.quota_max_bytes_in_flight},
+                              {"max_frames_per_second", i.quota_max_frames_per_second},
+                              {"max_streams", i.quota_max_streams}}}};
         std::cout << j.dump() << '\n';
         return 0;
     }
@@ -576,6 +589,18 @@ int run_info(const InfoArgs& args) {
         static_cast<unsigned long long>(i.max_objects_per_scene),
         static_cast<unsigned long long>(i.max_triangles_per_scene),
         static_cast<unsigned long long>(i.max_message_bytes), i.max_frames_in_flight);
+    if (!i.principal.empty()) {
+        // Quotas of 0 are unlimited.
+        std::printf(
+            "token:             %s (quotas: %llu scenes, %llu objects, %llu triangles, %llu "
+            "bytes held, %llu bytes in flight, %g frames/s, %llu streams; 0 = unlimited)\n",
+            i.principal.c_str(), static_cast<unsigned long long>(i.quota_max_scenes),
+            static_cast<unsigned long long>(i.quota_max_objects),
+            static_cast<unsigned long long>(i.quota_max_triangles),
+            static_cast<unsigned long long>(i.quota_max_bytes_held),
+            static_cast<unsigned long long>(i.quota_max_bytes_in_flight),
+            i.quota_max_frames_per_second, static_cast<unsigned long long>(i.quota_max_streams));
+    }
     return 0;
 }
 
@@ -595,6 +620,7 @@ int main(int argc, char** argv) {
         auto* server_opt = distance->add_option("--server", dist.server,
                                                 "Run on the proximad daemon at HOST:PORT instead");
         server_opt->excludes(local_flag);
+        cli::add_server_flags(*distance, dist.server_flags, server_opt);
         distance
             ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
                          "With --server: objects beyond this many bytes (in all) are uploaded "
@@ -638,13 +664,15 @@ int main(int argc, char** argv) {
         demo->add_option("--culler", demo_args.culler,
                          "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
             ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
-        demo->add_option("--server", demo_args.server,
-                         "Stream the frames to the proximad daemon at HOST:PORT");
+        auto* demo_server = demo->add_option(
+            "--server", demo_args.server, "Stream the frames to the proximad daemon at HOST:PORT");
+        cli::add_server_flags(*demo, demo_args.server_flags, demo_server);
         demo->add_flag("--json", demo_args.json, "One JSON object per frame");
 
         InfoArgs info_args;
         auto* info = app.add_subcommand("info", "Show a proximad daemon's version and limits");
         info->add_option("--server", info_args.server, "The daemon's HOST:PORT")->required();
+        cli::add_server_flags(*info, info_args.server_flags);
         info->add_flag("--json", info_args.json, "Print one JSON object");
 
         int command_exit = -1;

@@ -48,9 +48,10 @@ double seconds_since(Clock::time_point start) {
     return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address) {
+StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address,
+                                                  const ServerFlags& flags) {
     // float64 vertices (the default): the avatar the daemon poses is bit-identical to ours.
-    return client::Client::connect(address);
+    return connect_server(address, flags);
 }
 
 // Writes `doc` to `file`, or to standard output when `file` is empty.
@@ -91,11 +92,12 @@ nlohmann::json cache_json(const massive::CacheStats& c) {
 
 struct ModelsArgs {
     std::string server;
+    ServerFlags server_flags;
     bool json = false;
 };
 
 int run_models(const ModelsArgs& args) {
-    auto c = connect(args.server);
+    auto c = connect(args.server, args.server_flags);
     if (!c.ok()) {
         return fail(c.status());
     }
@@ -162,6 +164,7 @@ int run_models(const ModelsArgs& args) {
 struct VerifyArgs {
     std::string store;
     std::string server;
+    ServerFlags server_flags;
     std::string model;
     double tolerance = 0.0;
     std::string cache_bytes;
@@ -274,7 +277,7 @@ int run_verify_local(const VerifyArgs& args, std::uint64_t cache_bytes) {
 }
 
 int run_verify_remote(const VerifyArgs& args) {
-    auto c = connect(args.server);
+    auto c = connect(args.server, args.server_flags);
     if (!c.ok()) {
         return fail(c.status());
     }
@@ -341,6 +344,7 @@ int run_verify(const VerifyArgs& args) {
 struct ReviewArgs {
     std::string store;
     std::string server;
+    ServerFlags server_flags;
     std::string model;
     std::string room;
     std::string member;
@@ -525,7 +529,7 @@ int run_review_local(const ReviewArgs& args, const TriangleMesh& avatar,
 
 int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
                       const std::vector<massive::Affine>& poses) {
-    auto c = connect(args.server);
+    auto c = connect(args.server, args.server_flags);
     if (!c.ok()) {
         return fail(c.status());
     }
@@ -642,6 +646,7 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     auto* models = app.add_subcommand(
         "models", "List the massive models a proximad daemon serves, and its cache counters");
     models->add_option("--server", models_args->server, "The daemon's HOST:PORT")->required();
+    add_server_flags(*models, models_args->server_flags);
     models->add_flag("--json", models_args->json, "Print one JSON object");
     models->callback([models_args, &exit_code] { exit_code = run_models(*models_args); });
 
@@ -657,6 +662,7 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     auto* server_opt = verify->add_option("--server", verify_args->server,
                                           "Run on the proximad daemon at HOST:PORT (with --model)");
     store_opt->excludes(server_opt);
+    add_server_flags(*verify, verify_args->server_flags, server_opt);
     verify->add_option("--model", verify_args->model, "With --server: the model's name")
         ->needs(server_opt);
     verify
@@ -694,6 +700,7 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
         review->add_option("--server", review_args->server,
                            "Join a review room on the proximad daemon at HOST:PORT (with --model)");
     review_store->excludes(review_server);
+    add_server_flags(*review, review_args->server_flags, review_server);
     review->add_option("--model", review_args->model, "With --server: the model's name")
         ->needs(review_server);
     review->add_option("--room", review_args->room, "With --server: the room (default: review)")
