@@ -188,9 +188,9 @@ class FrameStream:
     """One StreamFrames call used in lockstep: send() a frame, receive() its FrameResult. Up to
     the daemon's max_frames_in_flight frames may be sent before receiving."""
 
-    def __init__(self, stub):
+    def __init__(self, stub, metadata=None):
         self._requests: "queue.Queue" = queue.Queue()
-        self._responses = stub.StreamFrames(iter(self._requests.get, None))
+        self._responses = stub.StreamFrames(iter(self._requests.get, None), metadata=metadata)
         self._closed = False
 
     def send(self, frame: "pb.Frame") -> None:
@@ -223,25 +223,87 @@ class FrameStream:
         self._requests.put(None)
 
 
+def read_token_file(path: str) -> str:
+    """The bearer token in a file: its first line, trimmed. Warns (on standard error) when the
+    file is readable by every user; raises ProximaError naming the file otherwise."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            line = f.readline().strip()
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        raise ProximaError("NOT_FOUND" if isinstance(e, FileNotFoundError) else
+                           "FAILED_PRECONDITION", f"token file '{path}': {e.strerror}") from None
+    if not line:
+        raise ProximaError("INVALID_ARGUMENT", f"token file '{path}': the first line is empty")
+    if mode & 0o004:
+        print(f"proxima: warning: token file '{path}' is readable by every user "
+              f"(mode {mode & 0o7777:04o}); the token is a password: chmod 600 it",
+              file=sys.stderr)
+    return line
+
+
+def _read_pem(path: Optional[str], what: str, marker: bytes) -> Optional[bytes]:
+    if not path:
+        return None
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise ProximaError("NOT_FOUND" if isinstance(e, FileNotFoundError) else
+                           "FAILED_PRECONDITION", f"{what} '{path}': {e.strerror}") from None
+    if b"-----BEGIN " not in data or marker not in data:
+        raise ProximaError("INVALID_ARGUMENT", f"{what} '{path}' holds no PEM "
+                           f"{'private key' if b'KEY' in marker else 'certificate'}")
+    return data
+
+
 class Client:
-    """A connection to proximad. `timeout` is the deadline of each unary call (None: none)."""
+    """A connection to proximad. `timeout` is the deadline of each unary call (None: none).
+
+    `token`: every call carries `authorization: Bearer <token>`. TLS when any tls_* argument is
+    given: `tls_ca` (PEM root CA file the daemon's certificate must chain to; None: the system's
+    roots), `tls_cert` and `tls_key` (this client's PEM certificate and key, for mutual TLS),
+    `tls_server_name` (the name the daemon's certificate must hold instead of the host)."""
 
     def __init__(self, address: str, connect_timeout: float = 5.0,
                  timeout: Optional[float] = None, float32: bool = False,
-                 inline_mesh_bytes: int = 1 << 20):
+                 inline_mesh_bytes: int = 1 << 20, token: Optional[str] = None,
+                 tls_ca: Optional[str] = None, tls_cert: Optional[str] = None,
+                 tls_key: Optional[str] = None, tls_server_name: Optional[str] = None):
         # Results of big scenes outgrow gRPC's 4 MiB default; the daemon's limits apply anyway.
-        self._channel = grpc.insecure_channel(address, options=[
-            ("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)])
+        options = [("grpc.max_receive_message_length", -1),
+                   ("grpc.max_send_message_length", -1)]
+        if token is not None and (not token or any(not 0x20 <= ord(c) <= 0x7e for c in token)):
+            raise ProximaError("INVALID_ARGUMENT", "the token must be non-empty printable ASCII")
+        self._metadata = (("authorization", f"Bearer {token}"),) if token else None
+        tls = tls_ca or tls_cert or tls_key or tls_server_name
+        if tls:
+            if bool(tls_cert) != bool(tls_key):
+                raise ProximaError("INVALID_ARGUMENT", "mutual TLS needs both tls_cert and tls_key")
+            credentials = grpc.ssl_channel_credentials(
+                root_certificates=_read_pem(tls_ca, "TLS root CA file", b"CERTIFICATE-----"),
+                private_key=_read_pem(tls_key, "TLS client key file", b"PRIVATE KEY-----"),
+                certificate_chain=_read_pem(tls_cert, "TLS client certificate file",
+                                            b"CERTIFICATE-----"))
+            if tls_server_name:
+                options.append(("grpc.ssl_target_name_override", tls_server_name))
+            self._channel = grpc.secure_channel(address, credentials, options=options)
+        else:
+            self._channel = grpc.insecure_channel(address, options=options)
         try:
             grpc.channel_ready_future(self._channel).result(timeout=connect_timeout)
         except grpc.FutureTimeoutError:
             self._channel.close()
             raise ProximaError("UNAVAILABLE", f"cannot reach proximad at {address} within "
-                                              f"{connect_timeout:g} s") from None
+                                              f"{connect_timeout:g} s" +
+                               (" (over TLS)" if tls else "")) from None
         self._stub = pb_grpc.ProximityStub(self._channel)
         self.timeout = timeout
         self.float32 = float32
         self.inline_mesh_bytes = inline_mesh_bytes
+
+    def _unary(self, method, request):
+        """One call with this client's deadline and token."""
+        return _call(method, request, timeout=self.timeout, metadata=self._metadata)
 
     def close(self) -> None:
         self._channel.close()
@@ -253,7 +315,7 @@ class Client:
         self.close()
 
     def server_info(self) -> "pb.ServerInfo":
-        return _call(self._stub.GetServerInfo, pb.GetServerInfoRequest(), timeout=self.timeout)
+        return self._unary(self._stub.GetServerInfo, pb.GetServerInfoRequest())
 
     def create_scene(self, meshes: Sequence[Mesh], name: str = "") -> "pb.SceneInfo":
         """Creates a scene with these objects, in this order (their result order). Objects travel
@@ -269,7 +331,7 @@ class Client:
             request.objects.append(encoded)
         else:
             k = len(meshes)
-        scene = _call(self._stub.CreateScene, request, timeout=self.timeout)
+        scene = self._unary(self._stub.CreateScene, request)
         try:
             for mesh in meshes[k:]:
                 obj = self.upload_object(scene.scene_id, mesh)
@@ -281,12 +343,10 @@ class Client:
         return scene
 
     def describe_scene(self, scene_id: str) -> "pb.SceneInfo":
-        return _call(self._stub.DescribeScene, pb.DescribeSceneRequest(scene_id=scene_id),
-                     timeout=self.timeout)
+        return self._unary(self._stub.DescribeScene, pb.DescribeSceneRequest(scene_id=scene_id))
 
     def delete_scene(self, scene_id: str) -> None:
-        _call(self._stub.DeleteScene, pb.DeleteSceneRequest(scene_id=scene_id),
-              timeout=self.timeout)
+        self._unary(self._stub.DeleteScene, pb.DeleteSceneRequest(scene_id=scene_id))
 
     def upload_object(self, scene_id: str, mesh: Mesh) -> "pb.ObjectInfo":
         """Adds one object through UploadObject: a header, then chunks of at most 1 MiB."""
@@ -302,13 +362,12 @@ class Client:
             for i in range(0, len(indices), UPLOAD_CHUNK_BYTES):
                 yield pb.UploadChunk(index_bytes=indices[i:i + UPLOAD_CHUNK_BYTES])
 
-        return _call(self._stub.UploadObject, chunks(), timeout=self.timeout)
+        return self._unary(self._stub.UploadObject, chunks())
 
     def query(self, scene_id: str, **frame_args) -> "pb.FrameResult":
         """One frame on an existing scene (the Query RPC); keywords as for make_frame."""
         frame_args.setdefault("float32", self.float32)
-        return _call(self._stub.Query, make_frame(scene_id=scene_id, **frame_args),
-                     timeout=self.timeout)
+        return self._unary(self._stub.Query, make_frame(scene_id=scene_id, **frame_args))
 
     def stream(self, frames: Iterable["pb.Frame"]) -> Iterator["pb.FrameResult"]:
         """Streams frames (built with make_frame) and yields one FrameResult per frame, in order.
@@ -316,10 +375,10 @@ class Client:
         result before producing the next frame. With an empty scene_id on the first frame the
         scene is created from its additions and deleted when the stream ends."""
         try:
-            yield from self._stub.StreamFrames(iter(frames))
+            yield from self._stub.StreamFrames(iter(frames), metadata=self._metadata)
         except grpc.RpcError as e:
             raise ProximaError.from_rpc(e) from None
 
     def open_stream(self) -> FrameStream:
         """A stream for lockstep use (send, receive), like the C++ FrameStream."""
-        return FrameStream(self._stub)
+        return FrameStream(self._stub, self._metadata)
