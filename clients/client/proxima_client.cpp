@@ -380,6 +380,9 @@ struct Client::Impl {
 };
 
 struct FrameStream::Impl {
+    // Keeps the channel the call runs on alive (Client replaces a failed channel with a new one
+    // while streams on the old one may still be finishing). Declared first: destroyed last.
+    std::shared_ptr<pb::Proximity::Stub> stub;
     bool float32 = false;
     // Sent on every frame: the existing scene's id, or empty for a stream-owned scene (whose id
     // the first result names; later frames need not repeat it).
@@ -599,7 +602,9 @@ Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedM
     grpc::ClientContext context;
     impl->prepare(context);
     pb::ObjectInfo& info = *info_out;
-    auto writer = impl->stub_now()->UploadObject(&context, &info);
+    // The call uses its channel until Finish: hold it (the client may replace its channel).
+    const auto stub = impl->stub_now();
+    auto writer = stub->UploadObject(&context, &info);
 
     // A failed write means the server has ended the call: stop sending, Finish says why.
     bool open = true;
@@ -673,7 +678,8 @@ StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& sc
     // No deadline: a stream lives as long as the simulation. The call starts lazily; a daemon
     // that refuses it (unknown scene, too many streams) answers on the first receive().
     m_impl->prepare(impl->context, false);
-    impl->stream = m_impl->stub_now()->StreamFrames(&impl->context);
+    impl->stub = m_impl->stub_now();
+    impl->stream = impl->stub->StreamFrames(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a frame stream");
     }
@@ -793,7 +799,8 @@ StatusOr<RemoteVerifySummary> Client::verify_model(
             if (timeout.count() > 0) {
                 context.set_deadline(deadline_after(timeout));
             }
-            auto reader = m_impl->stub_now()->VerifyModel(&context, request);
+            const auto stub = m_impl->stub_now();  // held until Finish, like the channel
+            auto reader = stub->VerifyModel(&context, request);
             pb::VerifyModelEvent event;
             while (reader->Read(&event)) {
                 if (stopped) {
@@ -843,6 +850,8 @@ StatusOr<RemoteVerifySummary> Client::verify_model(
 struct ReviewSession::Impl {
     static constexpr std::size_t MAX_QUEUED = 64;
 
+    // Keeps the call's channel alive (see FrameStream::Impl). Declared first: destroyed last.
+    std::shared_ptr<pb::Proximity::Stub> stub;
     bool float32 = false;
     grpc::ClientContext context;
     std::unique_ptr<grpc::ClientReaderWriter<pb::ReviewRequest, pb::ReviewEvent>> stream;
@@ -921,7 +930,8 @@ StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& j
         return st;
     }
     m_impl->prepare(impl->context, false);
-    impl->stream = m_impl->stub_now()->Review(&impl->context);
+    impl->stub = m_impl->stub_now();
+    impl->stream = impl->stub->Review(&impl->context);
     if (!impl->stream) {
         return Status(StatusCode::internal, "could not start a review stream");
     }

@@ -169,6 +169,14 @@ TEST(ClientBackoff, CallsToADaemonThatDiedRetryThenReport) {
     ASSERT_TRUE(c.ok()) << c.status().to_string();
     ASSERT_TRUE(c.value()->server_info().ok());
     EXPECT_TRUE(log.events.empty());
+    // A stream open across the failure: the client replaces its failed channel below, and the
+    // stream must still be usable to the end on the old one (which it keeps alive).
+    auto stream = c.value()->open_stream("");
+    ASSERT_TRUE(stream.ok());
+    FrameRequest first;
+    first.update.additions.push_back({"box", test::box({0, 0, 0}, {1, 1, 1})});
+    ASSERT_TRUE(stream.value()->send(first).ok());
+    ASSERT_TRUE(stream.value()->receive().ok());
 
     daemon.signal(SIGKILL);
     ASSERT_TRUE(daemon.wait_exit(5s).has_value());
@@ -182,6 +190,9 @@ TEST(ClientBackoff, CallsToADaemonThatDiedRetryThenReport) {
     for (std::size_t i = 1; i < log.events.size(); ++i) {
         EXPECT_GE(log.events[i].at - log.events[i - 1].at, log.events[i - 1].event.delay);
     }
+    (void)stream.value()->send(first);
+    EXPECT_EQ(stream.value()->receive().status().code(), StatusCode::unavailable);
+    EXPECT_EQ(stream.value()->finish().code(), StatusCode::unavailable);
 }
 
 // --- A fake daemon whose answers the test chooses ---------------------------------------------
