@@ -70,6 +70,28 @@ TEST(CcdQueries, ReadsSevenAndSixColumns) {
     EXPECT_FALSE(r6.value()[0].truth.has_value());
 }
 
+// The in-memory parser (the fuzz target's) is the file reader's: same queries, same messages.
+TEST(CcdQueries, ParsesTextLikeTheFileReader) {
+    const std::string text = query_rows("1") + query_rows("0");
+    const auto path = write_temp("parse", text);
+    auto from_file = read_ccd_queries(path);
+    fs::remove(path);
+    auto from_text = parse_ccd_queries(text, "text.csv");
+    ASSERT_TRUE(from_file.ok() && from_text.ok());
+    ASSERT_EQ(from_text->size(), from_file->size());
+    for (std::size_t q = 0; q < from_text->size(); ++q) {
+        EXPECT_EQ(from_text.value()[q].points, from_file.value()[q].points);
+        EXPECT_EQ(from_text.value()[q].truth, from_file.value()[q].truth);
+    }
+    auto bad = parse_ccd_queries("1,0,1,1,1,1\n", "named.csv");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.status().message(), "named.csv:1: zero denominator for x");
+    // No text at all holds no queries.
+    auto empty = parse_ccd_queries("", "empty.csv");
+    ASSERT_TRUE(empty.ok());
+    EXPECT_TRUE(empty->empty());
+}
+
 TEST(CcdQueries, RoundsLongRationalsToNearest) {
     // 34-digit numbers as in the benchmark, CRLF line ends, spaces, an explicit '+'.
     std::string text;

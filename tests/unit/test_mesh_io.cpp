@@ -1,5 +1,6 @@
 // read_mesh: native double-precision PLY and OFF (bit-exact coordinates, fan triangulation in
-// file order, any PLY layout), assimp for the rest, and errors instead of crashes on bad input.
+// file order, any PLY layout), assimp for OBJ/STL/glTF, the format allowlist, the in-memory
+// entry point, and errors instead of crashes on bad input.
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -506,6 +508,88 @@ TEST(MeshIo, StlAndGlbThroughAssimp) {
         << glb->triangles.size();
     std::printf("2CylinderEngine.glb: %zu triangles (75,730 in its meshes, before instancing)\n",
                 glb->triangles.size());
+}
+
+// ---------------------------------------------------------------------------------------------
+// The format allowlist and the in-memory entry point (the fuzz target's)
+
+const std::string TETRA_OBJ = "o tetra\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\n";
+
+TEST(MeshIo, ObjAndAsciiStlThroughAssimp) {
+    const std::string obj = temp_path("tetra.obj");
+    write_bytes(obj, TETRA_OBJ);
+    // assimp gives every face corner its own vertex; welding restores the 4 shared ones.
+    const auto read = read_mesh(obj);
+    ASSERT_TRUE(read.ok()) << read.status().to_string();
+    EXPECT_EQ(read->vertices.size(), 4u);
+    EXPECT_EQ(read->triangles.size(), 2u);
+
+    const std::string stl = temp_path("tri.STL");  // extensions in any case
+    write_bytes(stl,
+                "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                "vertex 0 1 0\nendloop\nendfacet\nendsolid t\n");
+    const auto tri = read_mesh(stl);
+    ASSERT_TRUE(tri.ok()) << tri.status().to_string();
+    EXPECT_EQ(tri->triangles.size(), 1u);
+}
+
+// Assimp would read these (by content, or by its ~40 other importers); the allowlist refuses
+// them, naming the accepted formats.
+TEST(MeshIo, FormatsOutsideTheAllowlistAreRefused) {
+    for (const char* name : {"tetra.txt", "tetra.dae", "tetra.3ds", "tetra"}) {
+        const std::string path = temp_path(name);
+        write_bytes(path, TETRA_OBJ);
+        expect_error_naming(read_mesh(path), path, "accepted: .ply, .off, .obj, .stl");
+    }
+    const auto memory = read_mesh_from_memory(TETRA_OBJ, "dae", "in-memory");
+    ASSERT_FALSE(memory.ok());
+    EXPECT_NE(memory.status().message().find("unsupported format 'dae'"), std::string::npos)
+        << memory.status().to_string();
+}
+
+TEST(MeshIo, FromMemoryReadsLikeFromAFile) {
+    expect_sample_mesh(read_mesh_from_memory(sample_ascii_ply(), "ply", "a.ply", no_weld()));
+    expect_sample_mesh(read_mesh_from_memory(sample_binary_ply(true), ".PLY", "b.ply", no_weld()));
+    const std::string off_path = temp_path("memory.off");
+    ASSERT_TRUE(write_off(off_path, TriangleMesh{sample_vertices(), sample_triangles()}).ok());
+    expect_sample_mesh(read_mesh_from_memory(read_bytes(off_path), "off", "c.off", no_weld()));
+
+    const auto obj = read_mesh_from_memory(TETRA_OBJ, "obj", "d.obj");
+    ASSERT_TRUE(obj.ok()) << obj.status().to_string();
+    EXPECT_EQ(obj->triangles.size(), 2u);
+    // Errors name the given name.
+    const auto bad = read_mesh_from_memory("ply\ngarbage\n", "ply", "named.ply");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.status().message().find("'named.ply'"), std::string::npos)
+        << bad.status().to_string();
+}
+
+// In memory, nothing but the buffer is read: a .gltf's external buffer is not found.
+TEST(MeshIo, FromMemoryReadsNoOtherFile) {
+    const std::string bin = temp_path("external.bin");
+    std::string buffer(3 * 12 + 3 * 2, '\0');
+    const float corners[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    std::memcpy(buffer.data(), corners, sizeof corners);
+    const std::uint16_t indices[3] = {0, 1, 2};
+    std::memcpy(buffer.data() + 36, indices, sizeof indices);
+    write_bytes(bin, buffer);
+    const std::string gltf =
+        R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],)"
+        R"("meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],)"
+        R"("accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",)"
+        R"("min":[0,0,0],"max":[1,1,0]},{"bufferView":1,"componentType":5123,"count":3,)"
+        R"("type":"SCALAR"}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},)"
+        R"({"buffer":0,"byteOffset":36,"byteLength":6}],"buffers":[{"byteLength":42,"uri":")" +
+        fs::path(bin).filename().string() + R"("}]})";
+    const std::string gltf_path = temp_path("external.gltf");
+    write_bytes(gltf_path, gltf);
+    // From the file system the buffer beside it loads ...
+    const auto from_file = read_mesh(gltf_path);
+    ASSERT_TRUE(from_file.ok()) << from_file.status().to_string();
+    EXPECT_EQ(from_file->triangles.size(), 1u);
+    // ... from memory it does not exist.
+    const auto from_memory = read_mesh_from_memory(gltf, "gltf", "external.gltf");
+    EXPECT_FALSE(from_memory.ok());
 }
 
 // ---------------------------------------------------------------------------------------------

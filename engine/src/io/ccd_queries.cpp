@@ -126,8 +126,10 @@ StatusOr<std::vector<CcdQuery>> read_ccd_queries(const std::string& path) {
     if (in.bad()) {
         return invalid_argument("cannot read CCD query file '" + path + "'");
     }
-    const std::string text = buffer.str();
+    return parse_ccd_queries(buffer.str(), path);
+}
 
+StatusOr<std::vector<CcdQuery>> parse_ccd_queries(std::string_view text, const std::string& path) {
     std::vector<CcdQuery> queries;
     Rational value;
     Rational scratch;
@@ -142,10 +144,10 @@ StatusOr<std::vector<CcdQuery>> read_ccd_queries(const std::string& path) {
     std::size_t pos = 0;
     while (pos < text.size()) {
         std::size_t end = text.find('\n', pos);
-        if (end == std::string::npos) {
+        if (end == std::string_view::npos) {
             end = text.size();
         }
-        const std::string_view line = trim(std::string_view(text).substr(pos, end - pos));
+        const std::string_view line = trim(text.substr(pos, end - pos));
         pos = end + 1;
         ++line_number;
         if (line.empty()) {

@@ -1,13 +1,20 @@
 #include "proxima/io/mesh_io.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cctype>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
+#include <string_view>
 #include <system_error>
 #include <tuple>
 
+#include <assimp/BaseImporter.h>
+#include <assimp/MemoryIOWrapper.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <assimp/Importer.hpp>
@@ -101,14 +108,53 @@ std::string read_head(const std::string& path) {
     return head;
 }
 
-StatusOr<TriangleMesh> read_with_assimp(const std::string& path) {
-    Assimp::Importer importer;
-    // Keep what assimp reads as it is: no joining (it would also merge on normals and UVs), no
-    // reordering. Triangulation keeps polygon order; degenerate triangles are kept (they are
-    // legal input for every query).
-    const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate);
+// The formats read through assimp; every other assimp importer is removed before reading, so a
+// file can never reach one of the ~40 importers nobody fuzzes (not even through assimp's
+// fall-back detection by content). Debian's assimp is not instrumented: the allowlist keeps the
+// attack surface to the formats the project tests and fuzzes.
+constexpr std::array<std::string_view, 4> ASSIMP_FORMATS = {"obj", "stl", "gltf", "glb"};
+
+std::string lower(std::string_view text) {
+    std::string out(text);
+    std::transform(out.begin(), out.end(), out.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return out;
+}
+
+bool is_assimp_format(std::string_view format) {
+    return std::find(ASSIMP_FORMATS.begin(), ASSIMP_FORMATS.end(), format) != ASSIMP_FORMATS.end();
+}
+
+// Unregisters (and frees: UnregisterLoader does not) every importer that claims none of
+// ASSIMP_FORMATS' extensions. The glTF 1.0 and 2.0 importers both claim .gltf/.glb and stay.
+void keep_allowed_importers(Assimp::Importer& importer) {
+    std::vector<Assimp::BaseImporter*> refused;
+    for (std::size_t i = 0; i < importer.GetImporterCount(); ++i) {
+        Assimp::BaseImporter* candidate = importer.GetImporter(i);
+        std::set<std::string> extensions;
+        candidate->GetExtensionList(extensions);
+        const bool allowed = std::any_of(extensions.begin(), extensions.end(),
+                                         [](const std::string& e) { return is_assimp_format(e); });
+        if (!allowed) {
+            refused.push_back(candidate);
+        }
+    }
+    for (Assimp::BaseImporter* candidate : refused) {
+        importer.UnregisterLoader(candidate);
+        delete candidate;
+    }
+}
+
+// Triangulation keeps polygon order; degenerate triangles are kept (they are legal input for
+// every query). No joining (it would also merge on normals and UVs), no reordering. The
+// validation step makes assimp reject scenes whose indices point outside their arrays instead of
+// handing them to collect().
+constexpr unsigned ASSIMP_FLAGS = aiProcess_Triangulate | aiProcess_ValidateDataStructure;
+
+StatusOr<TriangleMesh> collect_scene(const Assimp::Importer& importer, const aiScene* scene,
+                                     const std::string& name) {
     if (scene == nullptr || scene->mRootNode == nullptr) {
-        return invalid_argument("mesh file '" + path +
+        return invalid_argument("mesh file '" + name +
                                 "': cannot be read: " + importer.GetErrorString());
     }
     TriangleMesh mesh;
@@ -117,13 +163,103 @@ StatusOr<TriangleMesh> read_with_assimp(const std::string& path) {
     return mesh;
 }
 
-StatusOr<TriangleMesh> read_native(const std::string& path, detail::NativeMeshFormat format) {
-    std::string data;
-    if (Status s = read_file(path, data); !s.ok()) {
+StatusOr<TriangleMesh> read_with_assimp(const std::string& path) {
+    Assimp::Importer importer;
+    keep_allowed_importers(importer);
+    // From the file system, so that a .gltf's external buffers and an .obj's materials load.
+    const aiScene* scene = importer.ReadFile(path, ASSIMP_FLAGS);
+    return collect_scene(importer, scene, path);
+}
+
+StatusOr<TriangleMesh> read_memory_with_assimp(std::string_view data, const std::string& format,
+                                               const std::string& name) {
+    Assimp::Importer importer;
+    keep_allowed_importers(importer);
+    // An I/O system that serves only the buffer: references to other files (a .gltf's buffers, an
+    // .obj's .mtl) fail instead of reaching the file system.
+    importer.SetIOHandler(new Assimp::MemoryIOSystem(
+        reinterpret_cast<const std::uint8_t*>(data.data()), data.size(), nullptr));
+    const std::string magic = std::string(AI_MEMORYIO_MAGIC_FILENAME) + "." + format;
+    const aiScene* scene = importer.ReadFile(magic, ASSIMP_FLAGS);
+    return collect_scene(importer, scene, name);
+}
+
+std::uint32_t little_u32(std::string_view data, std::size_t at) {
+    std::uint32_t v = 0;
+    for (int b = 3; b >= 0; --b) {
+        v = (v << 8) | static_cast<unsigned char>(data[at + static_cast<std::size_t>(b)]);
+    }
+    return v;
+}
+
+// Debian's assimp 5.2.5 sizes its buffers from a binary glTF's header before comparing them with
+// the file: a 49-byte .glb whose JSON chunk claimed 687 MB took 5 s and 800 MB (fuzz_mesh,
+// tests/fuzz/regressions/mesh/). Every length in the header and chunk headers must fit in the
+// bytes that are there. Other problems (magic, versions, chunk types) are left to assimp.
+Status check_glb(std::string_view data, const std::string& name) {
+    const auto error = [&](const std::string& what) {
+        return invalid_argument("mesh file '" + name + "': binary glTF: " + what);
+    };
+    if (data.size() < 12) {
+        return error("the file is " + std::to_string(data.size()) +
+                     " bytes, shorter than the 12-byte header");
+    }
+    if (data.substr(0, 4) != "glTF") {
+        return {};
+    }
+    const std::uint32_t version = little_u32(data, 4);
+    const std::uint64_t length = little_u32(data, 8);
+    if (length > data.size()) {
+        return error("the header declares " + std::to_string(length) + " bytes, the file holds " +
+                     std::to_string(data.size()));
+    }
+    if (version == 1) {
+        // glTF 1.0 (KHR_binary_glTF): a 20-byte header, then the scene's JSON.
+        if (data.size() < 20) {
+            return error("the file is " + std::to_string(data.size()) +
+                         " bytes, shorter than the 20-byte glTF 1.0 header");
+        }
+        const std::uint64_t content = little_u32(data, 12);
+        if (content > data.size() - 20) {
+            return error("the scene declares " + std::to_string(content) + " bytes, " +
+                         std::to_string(data.size() - 20) + " follow the header");
+        }
+        return {};
+    }
+    // glTF 2.0: chunks of (length, type, data) after the 12-byte header.
+    std::size_t at = 12;
+    while (data.size() - at >= 8) {
+        const std::uint64_t chunk = little_u32(data, at);
+        if (chunk > data.size() - at - 8) {
+            return error("the chunk at byte " + std::to_string(at) + " declares " +
+                         std::to_string(chunk) + " bytes, " + std::to_string(data.size() - at - 8) +
+                         " follow it");
+        }
+        at += 8 + static_cast<std::size_t>(chunk);
+    }
+    return {};
+}
+
+Status unsupported_format(const std::string& name, const std::string& format) {
+    return invalid_argument("mesh file '" + name + "': unsupported format '" + format +
+                            "' (accepted: " + std::string(ACCEPTED_MESH_FORMATS) + ")");
+}
+
+// What read_mesh and read_mesh_from_memory do after reading: validate, then weld.
+StatusOr<TriangleMesh> finish(StatusOr<TriangleMesh> read, const std::string& name,
+                              const MeshReadOptions& options) {
+    if (!read.ok()) {
+        return read.status();
+    }
+    TriangleMesh mesh = std::move(read).value();
+    // Validate before welding: the weld's ordered map cannot hold NaN keys.
+    if (Status s = validate_mesh(mesh, "mesh file '" + name + "'"); !s.ok()) {
         return s;
     }
-    return format == detail::NativeMeshFormat::ply ? detail::read_ply(path, data)
-                                                   : detail::read_off(path, data);
+    if (options.weld_identical_positions) {
+        weld(mesh);
+    }
+    return mesh;
 }
 
 }  // namespace
@@ -146,26 +282,59 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
             return invalid_argument("mesh file '" + path + "': cannot be opened for reading");
         }
     }
+    const std::string extension = lower(std::filesystem::path(path).extension().string());
     // PLY and OFF are read natively, in double: Debian's assimp reads them at float precision.
+    // They are also recognised by content under any other extension (frames without one).
     detail::NativeMeshFormat format = detail::native_format_from_extension(path);
-    if (format == detail::NativeMeshFormat::none) {
+    const bool assimp = format == detail::NativeMeshFormat::none && !extension.empty() &&
+                        is_assimp_format(extension.substr(1));
+    if (format == detail::NativeMeshFormat::none && !assimp) {
         format = detail::native_format_from_content(read_head(path));
+        if (format == detail::NativeMeshFormat::none) {
+            return unsupported_format(path, extension.empty() ? "(no extension)" : extension);
+        }
     }
-    StatusOr<TriangleMesh> read = format == detail::NativeMeshFormat::none
-                                      ? read_with_assimp(path)
-                                      : read_native(path, format);
-    if (!read.ok()) {
-        return read.status();
+    // A .glb is read once here to check its header (check_glb) before assimp reads it.
+    std::string data;
+    if (assimp && extension != ".glb") {
+        return finish(read_with_assimp(path), path, options);
     }
-    TriangleMesh mesh = std::move(read).value();
-    // Validate before welding: the weld's ordered map cannot hold NaN keys.
-    if (Status s = validate_mesh(mesh, "mesh file '" + path + "'"); !s.ok()) {
+    if (Status s = read_file(path, data); !s.ok()) {
         return s;
     }
-    if (options.weld_identical_positions) {
-        weld(mesh);
+    if (assimp) {
+        if (Status s = check_glb(data, path); !s.ok()) {
+            return s;
+        }
+        return finish(read_with_assimp(path), path, options);
     }
-    return mesh;
+    return finish(format == detail::NativeMeshFormat::ply ? detail::read_ply(path, data)
+                                                          : detail::read_off(path, data),
+                  path, options);
+}
+
+StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
+                                             const std::string& name,
+                                             const MeshReadOptions& options) {
+    std::string key = lower(format);
+    if (key.starts_with('.')) {
+        key.erase(0, 1);
+    }
+    if (key == "ply") {
+        return finish(detail::read_ply(name, data), name, options);
+    }
+    if (key == "off") {
+        return finish(detail::read_off(name, data), name, options);
+    }
+    if (!is_assimp_format(key)) {
+        return unsupported_format(name, std::string(format));
+    }
+    if (key == "glb") {
+        if (Status s = check_glb(data, name); !s.ok()) {
+            return s;
+        }
+    }
+    return finish(read_memory_with_assimp(data, key, name), name, options);
 }
 
 Status write_off(const std::string& path, const TriangleMesh& mesh) {

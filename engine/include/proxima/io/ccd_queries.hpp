@@ -30,6 +30,10 @@ struct CcdQuery {
 // is not a multiple of 8. An empty file holds no queries.
 StatusOr<std::vector<CcdQuery>> read_ccd_queries(const std::string& path);
 
+// The parser behind read_ccd_queries, on text already in memory (the fuzz target feeds it
+// directly); `path` is used only in messages.
+StatusOr<std::vector<CcdQuery>> parse_ccd_queries(std::string_view text, const std::string& path);
+
 // The kind the benchmark's folder names give: a path containing "vertex-face" is vertex_face, one
 // containing "edge-edge" edge_edge; none or both: nullopt.
 std::optional<ccd::CcdKind> ccd_kind_from_path(std::string_view path);

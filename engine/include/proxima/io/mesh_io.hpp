@@ -1,14 +1,20 @@
 #pragma once
 // Reading meshes from files. The engine sees only TriangleMesh: one indexed mesh per file.
 //
-// Precision: PLY (ASCII, binary little and big endian) and ASCII OFF are read by our own readers
-// and every coordinate is converted straight to double, so double-precision files keep their
-// exact values. Every other format (OBJ, STL, glTF/GLB and whatever else the installed assimp
-// reads) goes through assimp, which Debian builds with ai_real = float: those coordinates are
-// float32 values widened to double. PLY and OFF are recognised by extension (any case) or, for
-// other extensions, by content ("ply" first line, OFF keyword).
+// Formats: an allowlist, by extension (any case): PLY (ASCII, binary little and big endian), OFF
+// (ASCII), OBJ, STL (ASCII and binary), glTF 2.0 / 1.0 (.gltf, .glb). PLY and OFF are also
+// recognised by content under any other extension ("ply" first line, OFF keyword); every other
+// file is refused (invalid_argument naming the accepted formats), although the installed assimp
+// reads ~40 more: those importers are not fuzzed (tests/fuzz, docs/reliability.md), so no file
+// reaches them.
+//
+// Precision: PLY and OFF are read by our own readers and every coordinate is converted straight
+// to double, so double-precision files keep their exact values. OBJ, STL and glTF go through
+// assimp, which Debian builds with ai_real = float: those coordinates are float32 values widened
+// to double.
 
 #include <string>
+#include <string_view>
 
 #include "proxima/mesh/mesh.hpp"
 #include "proxima/status.hpp"
@@ -26,9 +32,21 @@ struct MeshReadOptions {
 // file. PLY/OFF polygons are triangulated as fans (v0, vi, vi+1), so triangle ids follow the
 // file; faces with fewer than 3 or out-of-range indices are errors. Through assimp, node
 // transforms are applied and points and lines dropped. Errors name the file and the problem:
-// missing (not_found), unreadable, unknown format, truncated or malformed data, header counts the
-// file cannot hold, no triangles, non-finite coordinates (all invalid_argument).
+// missing (not_found), unreadable, a format outside the allowlist, truncated or malformed data,
+// header counts the file cannot hold, no triangles, non-finite coordinates (all invalid_argument).
 StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options = {});
+
+// The accepted formats, as error messages list them.
+inline constexpr std::string_view ACCEPTED_MESH_FORMATS =
+    ".ply, .off, .obj, .stl, .gltf, .glb (PLY and OFF also by content)";
+
+// read_mesh on bytes already in memory; `format` is one of the accepted extensions, with or
+// without the dot, any case (no content detection), and `name` is used only in messages.
+// Nothing else is read: files the data refers to (a .gltf's external buffers, an .obj's .mtl)
+// are not found. The fuzz target tests/fuzz/fuzz_mesh.cpp reads through this.
+StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
+                                             const std::string& name,
+                                             const MeshReadOptions& options = {});
 
 // Writes an ASCII OFF file (for tests and tools; exact round trip of doubles with %.17g).
 Status write_off(const std::string& path, const TriangleMesh& mesh);
