@@ -180,13 +180,9 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     if (Status s = validate_update(scene, decoded->update, limits, entry.id); !s.ok()) {
         return s;
     }
-    const Holding before_holding = entry.charged();
-    const Holding after_holding = holding_after(scene, decoded->update);
-    if (Status s = entry.charge(after_holding); !s.ok()) {
-        return s;
-    }
     // CCD interpolates each vertex between its two positions: the primitives must be the same at
-    // both ends, so such a frame may only move vertices.
+    // both ends, so such a frame may only move vertices. Checked before the owner is charged: a
+    // refused frame must leave the charge as it was (fuzz_request found it charged).
     std::optional<Scene> before;
     if (decoded->ccd) {
         const auto& u = decoded->update;
@@ -199,6 +195,13 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
                                                 "but this frame has ") +
                                     change + " (send those in a frame of their own)");
         }
+    }
+    const Holding before_holding = entry.charged();
+    const Holding after_holding = holding_after(scene, decoded->update);
+    if (Status s = entry.charge(after_holding); !s.ok()) {
+        return s;
+    }
+    if (decoded->ccd) {
         before = scene;  // the positions at t = 0; topologies are shared, not copied
     }
     auto changes = scene.apply(std::move(decoded->update));
