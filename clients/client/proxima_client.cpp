@@ -304,7 +304,10 @@ struct Client::Impl {
         if (options.tls) {
             out +=
                 " (over TLS: does the daemon serve TLS, does its certificate chain to the root "
-                "CA and name the host or the server-name override?)";
+                "CA and name the host or the server-name override";
+            out += options.tls->client_cert_pem.empty()
+                       ? ", does it want a client certificate (mutual TLS)?)"
+                       : ", does it accept this client's certificate?)";
         }
         return out;
     }

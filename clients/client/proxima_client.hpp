@@ -36,9 +36,8 @@ struct TlsOptions {
 };
 
 // The gRPC code name of a status this library returned: the engine's name ("NOT_FOUND",
-// "UNAVAILABLE", ...), or for the gRPC codes the engine has no name for, which arrive as
-// internal with "gRPC NAME: " in front of the message, that NAME ("UNAUTHENTICATED",
-// "PERMISSION_DENIED", ...).
+// "UNAUTHENTICATED", ...), or for the gRPC codes the engine has no name for, which arrive as
+// internal with "gRPC NAME: " in front of the message, that NAME ("UNIMPLEMENTED", ...).
 std::string grpc_code_name(const Status& status);
 // "UNAUTHENTICATED: <the daemon's message>": Status::to_string with grpc_code_name.
 std::string describe_status(const Status& status);
@@ -68,7 +67,8 @@ struct RetryEvent {
 // (no daemon listening, connection refused or reset, the daemon shutting down) is retried after
 // a sleep drawn uniformly from [0, min(max_backoff, initial_backoff * multiplier^(attempt-1))];
 // every other code (INVALID_ARGUMENT, NOT_FOUND, UNAUTHENTICATED, RESOURCE_EXHAUSTED, ...) is
-// returned at once. Which calls retry is in docs/api.md ("Reconnecting"): those safe to repeat.
+// returned at once. Which calls retry is in docs/api.md ("Tokens, TLS and reconnecting"): those
+// safe to repeat.
 struct RetryOptions {
     // Attempts per call, the first included; 1 never retries.
     int max_attempts = 5;
