@@ -238,6 +238,16 @@ StatusOr<std::string> Daemon::start() {
     // gRPC sets SO_REUSEPORT by default: a second daemon on a busy port would then start and
     // share the port's connections with the first. A busy port must be an error.
     builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+    // A client that vanishes without closing its connection (a host that lost power, a network
+    // partition: no FIN, no RST) is found by keepalive pings within ~40 s, and its streams are
+    // cancelled like any other, which frees their scenes and quotas.
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 30'000);
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10'000);
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+    // Clients may ping as often as every 10 s (gRPC's default minimum of 5 min would make the
+    // daemon close connections of clients whose own keepalive is tighter).
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 10'000);
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PING_STRIKES, 0);
     // Explicit in both directions: a frame of a large scene is big, but not unboundedly so.
     const int max_bytes = static_cast<int>(m_config.limits.max_message_bytes);
     builder.SetMaxReceiveMessageSize(max_bytes);
