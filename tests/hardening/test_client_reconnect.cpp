@@ -15,6 +15,8 @@
 #include <atomic>
 #include <bit>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -470,8 +472,9 @@ void expect_same_answers(const QueryResult& local, const QueryResult& remote, st
         EXPECT_EQ(local.separation[i].other, remote.separation[i].other) << "frame " << k;
         EXPECT_EQ(bits(local.separation[i].distance), bits(remote.separation[i].distance))
             << "frame " << k << " object " << i;
-        EXPECT_EQ(local.separation[i].triangle, remote.separation[i].triangle);
-        EXPECT_EQ(local.separation[i].other_triangle, remote.separation[i].other_triangle);
+        EXPECT_EQ(local.separation[i].triangle, remote.separation[i].triangle) << "frame " << k;
+        EXPECT_EQ(local.separation[i].other_triangle, remote.separation[i].other_triangle)
+            << "frame " << k;
     }
     ASSERT_EQ(local.self.size(), remote.self.size());
     for (std::size_t i = 0; i < local.self.size(); ++i) {
@@ -502,16 +505,33 @@ QueryRequest all_queries() {
 // The in-process reference: the same updates (in the session's ids, which are the engine's: the
 // session keeps the first daemon's numbering, and that daemon numbered like the engine).
 struct Reference {
-    ProximityEngine engine;
+    std::unique_ptr<ProximityEngine> engine = std::make_unique<ProximityEngine>();
 
     SceneUpdateResult apply(const SceneUpdate& update) {
-        auto r = engine.scene().apply(update);
+        auto r = engine->scene().apply(update);
         EXPECT_TRUE(r.ok()) << r.status().to_string();
         return r.ok() ? r.value() : SceneUpdateResult{};
     }
+    // What the session does on a re-creation: a new engine from the current objects. Needed
+    // where triangle pairs tie exactly: which of them a query reports depends on the culler's
+    // history (refitted since creation vs built now); the distances and pair sets do not.
+    void rebuild() {
+        std::vector<NamedMesh> objects;
+        for (const auto& o : engine->scene().objects()) {
+            NamedMesh m{o.name, {o.vertices, {}}};
+            for (std::uint32_t t = 0; t < o.triangle_count(); ++t) {
+                m.mesh.triangles.push_back(o.triangle(t));
+            }
+            objects.push_back(std::move(m));
+        }
+        engine = std::make_unique<ProximityEngine>();
+        for (auto& o : objects) {
+            EXPECT_TRUE(engine->scene().add_object(std::move(o)).ok());
+        }
+    }
     std::vector<ObjectId> ids() const {
         std::vector<ObjectId> out;
-        for (const auto& o : engine.scene().objects()) {
+        for (const auto& o : engine->scene().objects()) {
             out.push_back(o.id);
         }
         return out;
@@ -523,7 +543,7 @@ FrameRequest moving_frame(const Reference& ref, std::uint64_t k) {
     FrameRequest f;
     f.frame = k;
     f.queries = all_queries();
-    for (const auto& o : ref.engine.scene().objects()) {
+    for (const auto& o : ref.engine->scene().objects()) {
         std::vector<Vec3> v = o.vertices;
         for (auto& p : v) {
             p.x += 0.01 * static_cast<double>(k % 3) - 0.01;
@@ -567,14 +587,14 @@ TEST(ResilientScene, SurvivesSigkillAndRestartOnTheSamePort) {
 
     Reference ref;
     for (const auto& o : objects) {
-        ASSERT_TRUE(ref.engine.scene().add_object(o).ok());
+        ASSERT_TRUE(ref.engine->scene().add_object(o).ok());
     }
     ASSERT_EQ(scene.object_ids(), ref.ids());
 
     // Answers frame `f` on the reference and checks the session's response against it.
     auto check = [&](const FrameRequest& f, const FrameResponse& r, bool recreated) {
         const auto applied = ref.apply(f.update);
-        auto local = ref.engine.query(f.queries);
+        auto local = ref.engine->query(f.queries);
         ASSERT_TRUE(local.ok());
         EXPECT_EQ(r.frame, f.frame);
         EXPECT_EQ(r.recreated_scene, recreated) << "frame " << f.frame;
@@ -701,6 +721,81 @@ TEST(ResilientScene, SurvivesSigkillAndRestartOnTheSamePort) {
     auto after = c.server_info();
     ASSERT_TRUE(after.ok());
     EXPECT_EQ(after->live_scenes, 0u);
+}
+
+// A daemon with tokens, stopped with SIGTERM (it drains: the stream ends UNAVAILABLE "shutting
+// down") and restarted on the same port: recovery carries the token, the ids need no remapping
+// (nothing was removed), and the session goes on in lockstep with the reference. Two boxes face
+// each other, so many triangle pairs tie for the closest distance: the reference is re-created
+// too, as the session re-creates the daemon's scene (see Reference::rebuild).
+TEST(ResilientScene, SurvivesADrainedRestartWithTokens) {
+    const auto dir = std::filesystem::temp_directory_path() /
+                     ("proxima-resilient-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    const auto tokens = (dir / "tokens.json").string();
+    {
+        std::ofstream out(tokens);
+        out << R"({"tokens": [{"name": "sim", "token": "resilient-token-0123456789",)"
+            << R"( "scenes": ["*"]}]})";
+    }
+    const std::vector<std::string> flags = {"--log-level", "warn", "--tokens", tokens};
+    std::vector<std::string> first_flags = flags;
+    auto daemon = std::make_unique<test::DaemonProcess>(first_flags);
+    ASSERT_TRUE(daemon->ok()) << daemon->error();
+    const int port = daemon->port();
+
+    ConnectOptions options;
+    options.token = "resilient-token-0123456789";
+    auto connected = Client::connect(daemon->address(), options);
+    ASSERT_TRUE(connected.ok()) << connected.status().to_string();
+    Client& c = *connected.value();
+    auto info = c.server_info();
+    ASSERT_TRUE(info.ok()) << info.status().to_string();
+    EXPECT_EQ(info->principal, "sim");
+
+    std::vector<NamedMesh> objects = {{"a", test::box({0, 0, 0}, {1, 1, 1})},
+                                      {"b", test::box({1.5, 0, 0}, {2.5, 1, 1})}};
+    ResilientSceneOptions ropts;
+    ropts.recovery = quick_retry(60, 25ms, true);
+    ropts.recovery.max_backoff = 300ms;
+    auto created = ResilientScene::create(c, "drained", objects, ropts);
+    ASSERT_TRUE(created.ok()) << created.status().to_string();
+    ResilientScene& scene = *created.value();
+    Reference ref;
+    for (const auto& o : objects) {
+        ASSERT_TRUE(ref.engine->scene().add_object(o).ok());
+    }
+    auto step = [&](std::uint64_t k, bool recreated) {
+        auto f = moving_frame(ref, k);
+        auto r = scene.step(f);
+        ASSERT_TRUE(r.ok()) << "frame " << k << ": " << r.status().to_string();
+        ref.apply(f.update);
+        auto local = ref.engine->query(f.queries);
+        ASSERT_TRUE(local.ok());
+        EXPECT_EQ(r->recreated_scene, recreated) << "frame " << k;
+        EXPECT_EQ(r->object_ids, ref.ids());
+        expect_same_answers(local.value(), r->result, k);
+    };
+    step(1, false);
+    step(2, false);
+
+    daemon->signal(SIGTERM);
+    ASSERT_TRUE(daemon->wait_exit(30s).has_value());
+    daemon.reset();
+    // Restarted from this (the test's main) thread before the next frame: PR_SET_PDEATHSIG ties
+    // the child to the thread that forks it.
+    std::vector<std::string> again = flags;
+    again.insert(again.begin(), {"--listen", "127.0.0.1:" + std::to_string(port)});
+    daemon = std::make_unique<test::DaemonProcess>(again);
+    ASSERT_TRUE(daemon->ok()) << daemon->error();
+
+    ref.rebuild();
+    step(3, true);
+    step(4, false);
+    EXPECT_EQ(scene.recreations(), 1u);
+    EXPECT_EQ(scene.object_ids(), (std::vector<ObjectId>{1, 2}));
+    EXPECT_TRUE(scene.finish().ok());
+    std::filesystem::remove_all(dir);
 }
 
 TEST(ResilientScene, ErrorsOtherThanUnavailableEndTheSessionFrameByFrame) {
