@@ -290,7 +290,9 @@ StatusOr<std::unique_ptr<Authenticator>> Authenticator::from_json(const nlohmann
         if (!entry.is_object()) {
             return invalid_argument(where + " must be an object");
         }
-        for (const auto& [key, value] : entry.items()) {
+        for (const auto& item : entry.items()) {
+            const std::string& key =
+                item.key();  // captured below: no structured binding (clang 14)
             static const char* const KNOWN[] = {"name",  "token",  "sha256", "scenes",
                                                 "rooms", "models", "quotas"};
             if (std::find_if(std::begin(KNOWN), std::end(KNOWN),

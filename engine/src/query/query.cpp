@@ -475,7 +475,10 @@ Status run_pairs(const Scene& scene, Culler& culler, const SweepAndPrune& sap, d
         if (work.should_stop()) {
             return;
         }
-        const auto [i, j] = object_pairs[k];
+        // Plain variables, not a structured binding: a lambda below captures them, which clang
+        // before 16 (Debian 12's clang 14 builds the fuzz targets) refuses for bindings.
+        const auto i = std::get<0>(object_pairs[k]);
+        const auto j = std::get<1>(object_pairs[k]);
         std::vector<TrianglePair> cands;
         culler.pairs_within(scene, i, j, radius, cands);
         if (pns != nullptr) {
