@@ -21,8 +21,12 @@ fuzz_build() {
     for name in "$@"; do
         targets+=("proxima_fuzz_$name")
     done
+    local launcher=()
+    if command -v ccache >/dev/null; then
+        launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)  # CI's reruns rebuild from the cache
+    fi
     if [[ ! -f "$FUZZ_BUILD/build.ninja" ]]; then
-        cmake -S "$FUZZ_ROOT" -B "$FUZZ_BUILD" -G Ninja \
+        cmake -S "$FUZZ_ROOT" -B "$FUZZ_BUILD" -G Ninja "${launcher[@]}" \
             -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Release \
             -DCMAKE_CXX_FLAGS_RELEASE="-O2 -gline-tables-only" \
             -DCMAKE_CXX_FLAGS="-fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
@@ -49,6 +53,13 @@ fuzz_options() {
         # full leak check: ~100 times slower. Leaks of these targets are checked by the replay
         # (LeakSanitizer at exit, in the ASan build) instead.
         options+=(-detect_leaks=0)
+    fi
+    if [[ "$name" == frames ]]; then
+        # CCD checks its deadline every 64 elementary tests, and a degenerate (coplanar, crossing)
+        # test uses its whole work bound: under ASan on a loaded machine a frame can overrun its
+        # 100 ms deadline by seconds (docs/reliability.md, "Open findings"). Slow units are still
+        # reported from 1 s.
+        options+=(-timeout=20)
     fi
     if [[ -f "$FUZZ_DIR/dict/$name.dict" ]]; then
         options+=("-dict=$FUZZ_DIR/dict/$name.dict")

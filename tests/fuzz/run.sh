@@ -3,7 +3,7 @@
 # (default 1) on a working corpus in build/fuzz/corpus/TARGET (kept between runs, seeded with the
 # committed corpus and crashers), and appends one line per process to build/fuzz/totals.tsv:
 #
-#   utc-date  target  seconds  executions  exec/s  cov  ft  corpus-units  exit-status
+#   utc-date  target  seconds-run  executions  exec/s  cov  ft  corpus-units  exit-status
 #
 # so totals over many runs are sums of column 4 (`bash tests/fuzz/run.sh --totals`). Crashers land
 # in build/fuzz/artifacts/; keep each one in tests/fuzz/regressions/TARGET/ once it is fixed.
@@ -63,6 +63,7 @@ inputs=("$work" "$FUZZ_DIR/corpus/$name")
 [[ -d "$FUZZ_DIR/regressions/$name" ]] && inputs+=("$FUZZ_DIR/regressions/$name")
 
 rc=0
+started=$(date +%s)
 cd "$logs"  # -jobs writes fuzz-N.log into the current directory
 if [[ "$jobs" -gt 1 ]]; then
     # shellcheck disable=SC2046
@@ -75,13 +76,14 @@ else
         -artifact_prefix="$FUZZ_BUILD/artifacts/$name-" \
         "${inputs[@]}" >"$logs/fuzz-0.log" 2>&1 || rc=$?
 fi
+elapsed=$(($(date +%s) - started))
 for log in "$logs"/fuzz-*.log; do
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
     rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
     cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
     ft=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
     units=$(find "$work" -type f | wc -l)
-    printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%FT%TZ)" "$name" "$seconds" \
+    printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%FT%TZ)" "$name" "$elapsed" \
         "${execs:-0}" "${rate:-0}" "${cov:-0}" "${ft:-0}" "$units" "$rc" | tee -a "$totals"
 done
 if [[ $rc -ne 0 ]]; then
