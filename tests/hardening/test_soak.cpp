@@ -9,7 +9,8 @@
 // daemon are printed every 1,000 cycles.
 //
 // PROXIMA_SOAK_CYCLES overrides the number of cycles (default 10000; a sanitizer job runs fewer).
-// With fewer than 2,000 cycles the warm-up is a tenth of them.
+// With fewer than 10,000 cycles the warm-up is a tenth of them. At the end the daemon must exit 0
+// on SIGTERM (under ASan: with no leak reported).
 
 #include <gtest/gtest.h>
 
@@ -34,6 +35,22 @@ namespace {
 
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
+
+// Under AddressSanitizer the RSS grows by design (freed memory sits in its quarantine, up to
+// 256 MiB) and ThreadSanitizer's shadow memory follows the heap's history: the 5% check only
+// means something without them. The other checks, and the leak check LeakSanitizer makes when
+// the daemon exits at the end, still apply.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool SANITIZED = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr bool SANITIZED = true;
+#else
+constexpr bool SANITIZED = false;
+#endif
+#else
+constexpr bool SANITIZED = false;
+#endif
 
 // A number from /proc/PID/status ("VmRSS:", in kB; "Threads:"), 0 when absent.
 std::uint64_t proc_status(pid_t pid, const std::string& key) {
@@ -257,9 +274,17 @@ TEST(Soak, ConnectCreateStreamDisconnectCyclesLeaveRssFlatAndNothingBehind) {
         1000.0 * daemon_cpu / static_cast<double>(cycles),
         1000.0 * client_cpu / static_cast<double>(cycles), static_cast<unsigned long long>(warm_up),
         mib(warm.rss), mib(end.rss), 100.0 * growth);
-    EXPECT_LE(growth, 0.05) << "the daemon's RSS grew by more than 5% after warm-up";
+    if (!SANITIZED) {
+        EXPECT_LE(growth, 0.05) << "the daemon's RSS grew by more than 5% after warm-up";
+    }
     // Connections are closed: no descriptor per cycle left open (a few may be closing).
     EXPECT_LE(end.fds, warm.fds + 8);
+    // And the daemon still shuts down cleanly (with ASan: LeakSanitizer finds nothing at exit,
+    // or the exit status is not 0).
+    daemon.signal(SIGTERM);
+    const auto status = daemon.wait_exit(30s);
+    ASSERT_TRUE(status.has_value()) << "proximad still running 30 s after SIGTERM";
+    EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << "wait status " << *status;
 }
 
 }  // namespace
