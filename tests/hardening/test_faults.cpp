@@ -58,6 +58,20 @@ using Clock = std::chrono::steady_clock;
 
 constexpr std::uint64_t MIB = 1 << 20;
 
+// Under AddressSanitizer freed memory sits in a quarantine (up to 256 MiB) and ThreadSanitizer
+// keeps shadow memory: RSS bounds only mean something without them. The other checks stay.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool SANITIZED = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr bool SANITIZED = true;
+#else
+constexpr bool SANITIZED = false;
+#endif
+#else
+constexpr bool SANITIZED = false;
+#endif
+
 // ---- helpers --------------------------------------------------------------------------------
 
 // Resident set of a process in bytes (VmRSS of /proc/PID/status), 0 when it cannot be read.
@@ -404,15 +418,20 @@ TEST(Faults, StalledFrameReaderKeepsDaemonMemoryBounded) {
         }
     });
 
-    // Watch until the daemon has stopped applying frames for 3 s (at most 120 s: an unbounded
-    // daemon would apply all 48, ~50 x frame_seconds), sampling its RSS, while a second client
-    // queries another scene.
+    // Watch until the daemon has applied a frame and then none for a while (at most 120 s: an
+    // unbounded daemon would apply all 48, 48 x frame_seconds), sampling its RSS, while a second
+    // client queries another scene.
     std::uint64_t peak = baseline;
     std::uint64_t applied = applied_before;
     std::uint64_t other_queries = 0;
     auto last_change = Clock::now();
     const auto watch_start = Clock::now();
-    while (Clock::now() - last_change < 3s && Clock::now() - watch_start < 120s) {
+    // Quiet for 3 s, or for 5 frames' time on a slow (loaded, sanitized) machine.
+    const auto quiet =
+        std::max<Clock::duration>(3s, std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double>(5 * frame_seconds)));
+    while ((Clock::now() - last_change < quiet || applied == applied_before) &&
+           Clock::now() - watch_start < 120s) {
         std::this_thread::sleep_for(100ms);
         peak = std::max(peak, rss_bytes(daemon.pid()));
         const std::uint64_t now_applied = frames_applied(*stub, big.scene_id());
@@ -444,7 +463,9 @@ TEST(Faults, StalledFrameReaderKeepsDaemonMemoryBounded) {
     // result's write done while its bytes still sat in the transport.
     EXPECT_LE(computed, IN_FLIGHT + 1);
     EXPECT_GE(computed, 1u);
-    EXPECT_LE(peak, bound);
+    if (!SANITIZED) {
+        EXPECT_LE(peak, bound);
+    }
     EXPECT_GT(other_queries, 0u);
 
     // The stalled client goes: its stream and its queued results are freed.
@@ -649,14 +670,17 @@ TEST(FaultsChildProcess, StalledFrameReader) {
 
 // Kills a client with SIGKILL `rounds` + 1 times, each time once its standard output holds
 // `ready_lines` lines and `ready`; checks the daemon frees its stream and scene each time and that
-// its RSS after the last rounds is within `slack` of the RSS after the first ones.
+// after every later round its RSS comes back (within 10 s) to within `slack` of its RSS after the
+// first round (which warms up what stays: threads, pools, gRPC's buffers).
 void kill_clients(const std::string& address, pid_t daemon_pid, const std::string& what,
                   const ChildProcess::Options& options, const std::string& ready,
                   std::size_t ready_lines, int rounds, std::chrono::milliseconds settle,
                   std::uint64_t slack) {
     auto stub = make_stub(address);
     const auto before = server_info(*stub);
+    const std::uint64_t idle = rss_bytes(daemon_pid);
     std::vector<std::uint64_t> curve;
+    std::vector<std::uint64_t> peaks;
     for (int round = 0; round <= rounds; ++round) {
         SCOPED_TRACE(what + " round " + std::to_string(round));
         ChildProcess child(options);
@@ -667,41 +691,54 @@ void kill_clients(const std::string& address, pid_t daemon_pid, const std::strin
         EXPECT_EQ(during.live_streams(), before.live_streams() + 1);
         EXPECT_EQ(during.live_scenes(), before.live_scenes() + 1);
         std::this_thread::sleep_for(settle);
+        peaks.push_back(rss_bytes(daemon_pid));
         child.kill(SIGKILL);
         EXPECT_TRUE(child.killed_by_sigkill());
         v1::ServerInfo after;
         EXPECT_TRUE(wait_for_live(*stub, before.live_streams(), before.live_scenes(), 20s, &after))
             << "after the client vanished: live_streams " << after.live_streams()
             << ", live_scenes " << after.live_scenes();
-        // Freeing the scene is handed to a worker: give it a moment before measuring.
+        // Freeing the scene is handed to a worker: wait for the RSS to come down (at most 10 s).
         std::this_thread::sleep_for(300ms);
-        curve.push_back(rss_bytes(daemon_pid));
+        std::uint64_t rss = rss_bytes(daemon_pid);
+        for (auto until = Clock::now() + 10s;
+             round > 0 && rss > curve.front() + slack && Clock::now() < until;) {
+            std::this_thread::sleep_for(100ms);
+            rss = rss_bytes(daemon_pid);
+        }
+        curve.push_back(rss);
+        if (round > 0 && !SANITIZED) {
+            EXPECT_LE(rss, curve.front() + slack)
+                << "the daemon kept memory of a vanished client: RSS " << mib(rss)
+                << " MiB, after the first one " << mib(curve.front()) << " MiB";
+        }
     }
-    std::string line;
-    for (std::uint64_t v : curve) {
-        line += " " + std::to_string(static_cast<int>(mib(v) + 0.5));
-    }
-    std::printf("[ faults ] %s killed %d times: daemon RSS (MiB) after each kill:%s\n",
-                what.c_str(), rounds + 1, line.c_str());
-    // A leak raises every later round; allocator noise (one round tens of MiB up, the next down)
-    // does not: the lower of the last two rounds against the higher of the first two.
-    ASSERT_GE(curve.size(), 4u);
-    const std::uint64_t early = std::max(curve[0], curve[1]);
-    const std::uint64_t late = std::min(curve[curve.size() - 2], curve.back());
-    EXPECT_LE(late, early + slack) << "the daemon's memory grew with each vanished client";
+    auto mibs = [](const std::vector<std::uint64_t>& values) {
+        std::string line;
+        for (std::uint64_t v : values) {
+            line += " " + std::to_string(static_cast<int>(mib(v) + 0.5));
+        }
+        return line;
+    };
+    std::printf(
+        "[ faults ] %s killed %d times: daemon RSS %.0f MiB before; with the client "
+        "(MiB):%s; after each kill (MiB):%s\n",
+        what.c_str(), rounds + 1, mib(idle), mibs(peaks).c_str(), mibs(curve).c_str());
 }
 
-// The daemon runs with MALLOC_ARENA_MAX=2 here. With glibc's default (up to 8 arenas a core, one
-// per thread that allocates) memory freed by one of the daemon's many threads stays cached in
-// that thread's arena, so after large frames the RSS wanders by tens of MiB from one round to the
-// next (measured: 124, 178, 189, 177, 194 MiB after five stalled clients) without anything being
-// leaked; with two arenas it stays within a few MiB (71, 45, 45, 57, 49), so a leak of one
-// client's scene or results would show.
+// The daemon runs with MALLOC_ARENA_MAX=2 and MALLOC_MMAP_THRESHOLD_=65536 here, so that its RSS
+// follows what it holds: blocks of 64 KiB or more (meshes, results) are mapped on their own and
+// unmapped when freed. With glibc's defaults (up to 8 arenas a core, one per thread that
+// allocates, and an mmap threshold that rises to the largest block freed, up to 32 MiB) freed
+// memory stays cached in the arenas and the RSS after a kill wanders by tens of MiB from round to
+// round without anything leaked (measured: 124, 178, 189, 177, 194 MiB after five stalled raw
+// clients); with these settings it is 27-29 MiB after every kill, the daemon's idle level, so one
+// leaked scene or result would show.
 TEST(Faults, VanishingClientsFreeTheirStreamsAndScenes) {
     const fs::path logs = make_temp_dir("vanish");
     ChildProcess daemon(
         {{PROXIMAD_PATH, "--listen", "127.0.0.1:0", "--gpu", "off", "--log-level", "warn"},
-         {"MALLOC_ARENA_MAX=2"},
+         {"MALLOC_ARENA_MAX=2", "MALLOC_MMAP_THRESHOLD_=65536"},
          logs / "proximad.out",
          logs / "proximad.err",
          std::nullopt});
@@ -721,8 +758,8 @@ TEST(Faults, VanishingClientsFreeTheirStreamsAndScenes) {
                                logs / "demo.out",
                                logs / "demo.err",
                                std::nullopt};
-    // A cloth-ball scene is ~15,000 triangles: a leaked one a round would be ~20 MiB over four.
-    kill_clients(address, daemon.pid(), "proxima demo --server", demo, "", 5, 4, 300ms, 16 * MIB);
+    // A cloth-ball scene is ~15,000 triangles, a few MiB: a leaked one would show.
+    kill_clients(address, daemon.pid(), "proxima demo --server", demo, "", 5, 4, 300ms, 8 * MIB);
 
     // The raw client that stopped reading, with ~5.6 MiB results queued for it in the daemon.
     ChildProcess::Options raw{{"/proc/self/exe", "--gtest_filter=FaultsChildProcess.*"},
@@ -731,9 +768,9 @@ TEST(Faults, VanishingClientsFreeTheirStreamsAndScenes) {
                               logs / "raw.err",
                               std::nullopt};
     // ~5 results of ~5.6 MiB and a 100K-triangle scene a round: a leak of either would be over
-    // 25 MiB a round, 100 MiB over four.
+    // 25 MiB.
     kill_clients(address, daemon.pid(), "stalled raw client", raw, "STALLED", 1, 4, 1500ms,
-                 32 * MIB);
+                 8 * MIB);
 
     v1::SceneInfo still;
     v1::DescribeSceneRequest request;
