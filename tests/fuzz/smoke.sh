@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Short fuzz run for CI: builds the libFuzzer targets with clang in build/fuzz, runs each on its
 # committed corpus (and kept crashers) for SECONDS_PER_TARGET seconds (default 20), one process,
-# and fails on any crash, leak, timeout (> 1 s per input) or out-of-memory. New inputs go to a
-# scratch directory, never into the repository. Prints the executions done per target.
+# and fails on any crash, leak, timeout (FUZZ_TIMEOUT, default 3 s per input) or out-of-memory.
+# New inputs go to a scratch directory, never into the repository. Prints the executions done per
+# target and the time taken.
 #
 #   bash tests/fuzz/smoke.sh [SECONDS_PER_TARGET]
 #

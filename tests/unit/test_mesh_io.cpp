@@ -533,6 +533,31 @@ TEST(MeshIo, ObjAndAsciiStlThroughAssimp) {
     EXPECT_EQ(tri->triangles.size(), 1u);
 }
 
+// Debian's assimp crashes (SIGSEGV) on a material library whose first statement is a texture map;
+// geometry needs no materials, so none is read: not the one mtllib names, nor assimp's fall-back
+// (the .obj's name with .mtl) when that one is missing.
+TEST(MeshIo, ObjMaterialLibrariesAreNeverRead) {
+    const std::string named_mtl = temp_path("bad_named.mtl");
+    write_bytes(named_mtl, "map_emissive a\nmap_Kd b\n");
+    const std::string named = temp_path("named.obj");
+    write_bytes(named, "mtllib " + fs::path(named_mtl).filename().string() + "\n" + TETRA_OBJ);
+    const auto read = read_mesh(named);
+    ASSERT_TRUE(read.ok()) << read.status().to_string();
+    EXPECT_EQ(read->triangles.size(), 2u);
+
+    const std::string fallback = temp_path("fallback.obj");
+    write_bytes(temp_path("fallback.mtl"), "map_Kd b\n");
+    write_bytes(fallback, "mtllib missing.mtl\n" + TETRA_OBJ);
+    const auto read_fallback = read_mesh(fallback);
+    ASSERT_TRUE(read_fallback.ok()) << read_fallback.status().to_string();
+    EXPECT_EQ(read_fallback->triangles.size(), 2u);
+
+    // In memory, the OBJ itself was served as its fall-back material library.
+    const auto memory = read_mesh_from_memory("mtllib l\nmap_emissive\n" + TETRA_OBJ, "obj", "m");
+    ASSERT_TRUE(memory.ok()) << memory.status().to_string();
+    EXPECT_EQ(memory->triangles.size(), 2u);
+}
+
 // Assimp would read these (by content, or by its ~40 other importers); the allowlist refuses
 // them, naming the accepted formats.
 TEST(MeshIo, FormatsOutsideTheAllowlistAreRefused) {

@@ -14,6 +14,7 @@
 #include <tuple>
 
 #include <assimp/BaseImporter.h>
+#include <assimp/DefaultIOSystem.h>
 #include <assimp/MemoryIOWrapper.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -125,6 +126,45 @@ bool is_assimp_format(std::string_view format) {
     return std::find(ASSIMP_FORMATS.begin(), ASSIMP_FORMATS.end(), format) != ASSIMP_FORMATS.end();
 }
 
+// Material libraries are never read. Debian's assimp 5.2.5 crashes (a write through a null
+// material) on an .mtl whose first statement is a texture map, such as "map_Kd a" before any
+// "newmtl": `proxima distance x.obj` died with SIGSEGV when x.obj named such a file, or when its
+// mtllib was missing and x.mtl beside it held one (assimp's fall-back name). Found by fuzz_mesh.
+// Geometry never needs materials, so no importer may open an .mtl.
+bool is_material_library(const char* file) {
+    const std::string name = lower(file == nullptr ? "" : file);
+    return name.size() >= 4 && name.compare(name.size() - 4, 4, ".mtl") == 0;
+}
+
+class GeometryFileSystem : public Assimp::DefaultIOSystem {
+  public:
+    bool Exists(const char* file) const override {
+        return !is_material_library(file) && DefaultIOSystem::Exists(file);
+    }
+    Assimp::IOStream* Open(const char* file, const char* mode) override {
+        return is_material_library(file) ? nullptr : DefaultIOSystem::Open(file, mode);
+    }
+};
+
+// Serves the buffer under its own name only. assimp's MemoryIOSystem serves it under every name
+// that starts with its magic prefix, so an OBJ read from memory was also read as its own fall-back
+// material library ("<magic>.mtl"), and reached the crash above.
+class BufferOnlySystem : public Assimp::MemoryIOSystem {
+  public:
+    BufferOnlySystem(std::string_view data, std::string name)
+        : MemoryIOSystem(reinterpret_cast<const std::uint8_t*>(data.data()), data.size(), nullptr),
+          m_name(std::move(name)) {}
+    bool Exists(const char* file) const override {
+        return file != nullptr && m_name == file && MemoryIOSystem::Exists(file);
+    }
+    Assimp::IOStream* Open(const char* file, const char* mode) override {
+        return file != nullptr && m_name == file ? MemoryIOSystem::Open(file, mode) : nullptr;
+    }
+
+  private:
+    const std::string m_name;
+};
+
 // Unregisters (and frees: UnregisterLoader does not) every importer that claims none of
 // ASSIMP_FORMATS' extensions. The glTF 1.0 and 2.0 importers both claim .gltf/.glb and stay.
 void keep_allowed_importers(Assimp::Importer& importer) {
@@ -166,7 +206,8 @@ StatusOr<TriangleMesh> collect_scene(const Assimp::Importer& importer, const aiS
 StatusOr<TriangleMesh> read_with_assimp(const std::string& path) {
     Assimp::Importer importer;
     keep_allowed_importers(importer);
-    // From the file system, so that a .gltf's external buffers and an .obj's materials load.
+    // From the file system, so that a .gltf's external buffers load; never an .mtl.
+    importer.SetIOHandler(new GeometryFileSystem());
     const aiScene* scene = importer.ReadFile(path, ASSIMP_FLAGS);
     return collect_scene(importer, scene, path);
 }
@@ -177,9 +218,8 @@ StatusOr<TriangleMesh> read_memory_with_assimp(std::string_view data, const std:
     keep_allowed_importers(importer);
     // An I/O system that serves only the buffer: references to other files (a .gltf's buffers, an
     // .obj's .mtl) fail instead of reaching the file system.
-    importer.SetIOHandler(new Assimp::MemoryIOSystem(
-        reinterpret_cast<const std::uint8_t*>(data.data()), data.size(), nullptr));
     const std::string magic = std::string(AI_MEMORYIO_MAGIC_FILENAME) + "." + format;
+    importer.SetIOHandler(new BufferOnlySystem(data, magic));
     const aiScene* scene = importer.ReadFile(magic, ASSIMP_FLAGS);
     return collect_scene(importer, scene, name);
 }

@@ -11,7 +11,8 @@
 // Precision: PLY and OFF are read by our own readers and every coordinate is converted straight
 // to double, so double-precision files keep their exact values. OBJ, STL and glTF go through
 // assimp, which Debian builds with ai_real = float: those coordinates are float32 values widened
-// to double.
+// to double. Material libraries (.mtl) are never read: geometry needs none, and Debian's assimp
+// crashes on some (docs/reliability.md, "Fuzzing").
 
 #include <string>
 #include <string_view>
