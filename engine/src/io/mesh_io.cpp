@@ -26,12 +26,24 @@ namespace proxima {
 
 namespace {
 
-void collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent, TriangleMesh& out,
-             std::size_t& skipped) {
+// Appends every mesh the node and its children instance. assimp's own validation step
+// (aiProcess_ValidateDataStructure) cannot be used: it rejects real files whose scene assimp built
+// itself (desk.obj of the shared data: "mFaces[444] is a LINE but mPrimitiveTypes does not report
+// the LINE flag"). So the indices this code follows are checked here instead: a mesh index or a
+// vertex index outside its array is an error, not a read out of bounds.
+Status collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent,
+               TriangleMesh& out) {
     const aiMatrix4x4 transform = parent * node->mTransformation;
     const bool identity = transform.IsIdentity();
     for (unsigned m = 0; m < node->mNumMeshes; ++m) {
-        const aiMesh* mesh = scene->mMeshes[node->mMeshes[m]];
+        const unsigned index = node->mMeshes[m];
+        const aiMesh* mesh = index < scene->mNumMeshes ? scene->mMeshes[index] : nullptr;
+        if (mesh == nullptr || (mesh->mNumVertices > 0 && mesh->mVertices == nullptr) ||
+            (mesh->mNumFaces > 0 && mesh->mFaces == nullptr)) {
+            return invalid_argument("node '" + std::string(node->mName.C_Str()) + "' names mesh " +
+                                    std::to_string(index) + " of " +
+                                    std::to_string(scene->mNumMeshes) + ", which has no data");
+        }
         const auto base = static_cast<std::uint32_t>(out.vertices.size());
         for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
             aiVector3D p = mesh->mVertices[v];
@@ -43,16 +55,29 @@ void collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent
         for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
             const aiFace& face = mesh->mFaces[f];
             if (face.mNumIndices != 3) {
-                ++skipped;  // points and lines (polygons were triangulated on import)
-                continue;
+                continue;  // points and lines (polygons were triangulated on import)
+            }
+            for (unsigned k = 0; k < 3; ++k) {
+                if (face.mIndices[k] >= mesh->mNumVertices) {
+                    return invalid_argument("mesh " + std::to_string(index) + ", face " +
+                                            std::to_string(f) + ": vertex index " +
+                                            std::to_string(face.mIndices[k]) + " of " +
+                                            std::to_string(mesh->mNumVertices));
+                }
             }
             out.triangles.push_back(
                 {base + face.mIndices[0], base + face.mIndices[1], base + face.mIndices[2]});
         }
     }
     for (unsigned c = 0; c < node->mNumChildren; ++c) {
-        collect(scene, node->mChildren[c], transform, out, skipped);
+        if (node->mChildren[c] == nullptr) {
+            continue;
+        }
+        if (Status s = collect(scene, node->mChildren[c], transform, out); !s.ok()) {
+            return s;
+        }
     }
+    return {};
 }
 
 // Merges vertices with identical coordinates, keeping the first occurrence's index order.
@@ -186,10 +211,9 @@ void keep_allowed_importers(Assimp::Importer& importer) {
 }
 
 // Triangulation keeps polygon order; degenerate triangles are kept (they are legal input for
-// every query). No joining (it would also merge on normals and UVs), no reordering. The
-// validation step makes assimp reject scenes whose indices point outside their arrays instead of
-// handing them to collect().
-constexpr unsigned ASSIMP_FLAGS = aiProcess_Triangulate | aiProcess_ValidateDataStructure;
+// every query). No joining (it would also merge on normals and UVs), no reordering; no validation
+// step (collect() checks what it follows).
+constexpr unsigned ASSIMP_FLAGS = aiProcess_Triangulate;
 
 StatusOr<TriangleMesh> collect_scene(const Assimp::Importer& importer, const aiScene* scene,
                                      const std::string& name) {
@@ -198,8 +222,9 @@ StatusOr<TriangleMesh> collect_scene(const Assimp::Importer& importer, const aiS
                                 "': cannot be read: " + importer.GetErrorString());
     }
     TriangleMesh mesh;
-    std::size_t skipped = 0;
-    collect(scene, scene->mRootNode, aiMatrix4x4(), mesh, skipped);
+    if (Status s = collect(scene, scene->mRootNode, aiMatrix4x4(), mesh); !s.ok()) {
+        return invalid_argument("mesh file '" + name + "': " + s.message());
+    }
     return mesh;
 }
 
