@@ -1,10 +1,218 @@
 #!/usr/bin/env bash
-# Installs everything (deploy/setup.sh) and runs the whole test suite: unit, property, CLI and the
-# benchmark smoke run. This is the README's test command and what CI runs (.ci/run).
+# Installs everything (deploy/setup.sh) and runs every test stage. This is the README's test
+# command and what CI runs (.ci/run). The stages, in this order:
+#
+#   release  the `release` preset: build (deploy/setup.sh), then the whole ctest suite (unit,
+#            property, massive, CLI, integration, hardening and the benchmark smoke runs)
+#   asan     the `asan` preset (AddressSanitizer + UndefinedBehaviorSanitizer + LeakSanitizer):
+#            build, then the whole ctest suite (the benchmarks are not built there)
+#   tsan     the `tsan` preset (ThreadSanitizer): the daemon, the CLI and the tests that drive the
+#            daemon (ctest label `integration`, which includes `hardening`), daemon instrumented
+#   fuzz     tests/fuzz/smoke.sh: a short run of every fuzz target
+#
+# Any failure fails the script (and CI); each stage prints a header and its wall time, and a
+# summary ends the run. See docs/reliability.md, "Sanitizers".
+#
+#   bash deploy/test.sh                     # every stage: what CI runs
+#   bash deploy/test.sh --only asan         # one stage, or several: --only asan,tsan
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-bash "$here/deploy/setup.sh"
 cd "$here"
-# Keep Mesa's shader cache (later: the EGL backend) out of $HOME on shared machines.
+
+all_stages=(release asan tsan fuzz)
+stages=("${all_stages[@]}")
+if [ "${1:-}" = "--only" ] && [ -n "${2:-}" ]; then
+  IFS=',' read -r -a stages <<<"$2"
+  for s in "${stages[@]}"; do
+    case " ${all_stages[*]} " in
+      *" $s "*) ;;
+      *) echo "deploy/test.sh: unknown stage '$s' (stages: ${all_stages[*]})" >&2; exit 2 ;;
+    esac
+  done
+elif [ $# -gt 0 ]; then
+  echo "usage: bash deploy/test.sh [--only STAGE[,STAGE...]]   (stages: ${all_stages[*]})" >&2
+  exit 2
+fi
+
+jobs="$(nproc)"
+# Keep Mesa's shader cache (the EGL backend's llvmpipe) out of $HOME on shared machines.
 export MESA_SHADER_CACHE_DIR="${MESA_SHADER_CACHE_DIR:-$here/build/mesa-cache}"
-ctest --preset release -j "$(nproc)"
+supp="$here/tests/sanitizers"
+
+# --- summary: printed on every exit, so a failing stage is named even under `set -e` ----------
+summary=()
+current=""
+stage_start=0
+script_start=$(date +%s)
+print_summary() {
+  local rc=$?
+  if [ -n "$current" ]; then
+    summary+=("$(printf '%-8s FAILED  %4ds' "$current" $(($(date +%s) - stage_start)))")
+  fi
+  echo
+  echo "==== summary ===="
+  for line in "${summary[@]}"; do
+    echo "$line"
+  done
+  printf 'total    %-7s %4ds\n' "$([ $rc -eq 0 ] && echo ok || echo FAILED)" \
+    $(($(date +%s) - script_start))
+}
+trap print_summary EXIT
+
+begin() {
+  current="$1"
+  stage_start=$(date +%s)
+  echo
+  echo "==== stage $1: $2 ===="
+}
+end() {
+  local took=$(($(date +%s) - stage_start))
+  echo "==== stage $current: ok in ${took}s ===="
+  summary+=("$(printf '%-8s ok      %4ds  %s' "$current" "$took" "$1")")
+  current=""
+}
+seconds_since() { echo $(($(date +%s) - $1)); }
+
+# Configures and builds a preset (optionally only some targets), quiet unless it fails.
+build_preset() {
+  local preset="$1"
+  shift
+  local log="/tmp/proxima-build-$preset.log"
+  if ! cmake --preset "$preset" >"$log" 2>&1; then
+    tail -n 80 "$log" >&2
+    echo "FAILED: configure (preset $preset; full log in $log)" >&2
+    return 1
+  fi
+  local targets=()
+  for t in "$@"; do
+    targets+=(--target "$t")
+  done
+  if ! cmake --build --preset "$preset" -j "$jobs" "${targets[@]}" >>"$log" 2>&1; then
+    tail -n 80 "$log" >&2
+    echo "FAILED: build (preset $preset; full log in $log)" >&2
+    return 1
+  fi
+}
+
+# Runs a ctest command line with sanitizer reports written to files ($1/<tool>.<pid>) rather than to the
+# processes' standard error: the daemons that the integration tests start are children of the
+# test executables, and a report there must fail the stage even when the test itself passed (a
+# daemon is killed at the end of each test). Any report file fails the stage.
+run_sanitized_ctest() {
+  local logs="$1"
+  shift
+  rm -rf "$logs"
+  mkdir -p "$logs"
+  local rc=0
+  "$@" || rc=$?
+  local reports
+  reports="$(find "$logs" -type f -size +0 | sort)"
+  if [ -n "$reports" ]; then
+    # The first few in full, then one line per distinct finding (all files stay in $logs).
+    echo "sanitizer reports in $(echo "$reports" | wc -l) processes (files in $logs):" >&2
+    echo "$reports" | head -n 5 | while read -r f; do
+      echo "---- $f" >&2
+      cat "$f" >&2
+    done
+    echo "---- every distinct SUMMARY line, with its count:" >&2
+    cat $reports | grep '^SUMMARY' | sort | uniq -c | sort -rn >&2 || true
+    rc=1
+  fi
+  return $rc
+}
+
+# Tests whose assertion is a wall-clock bound or a timeout sized for the release build; they run
+# in the release stage, and under a sanitizer's 2-15x slowdown they measure the sanitizer:
+#   Daemon.SigtermLetsAFrameInFlightFinish   NOT_SERVING within 50 ms of SIGTERM
+#   Daemon.DrainDeadlineCancelsWorkThatOutlastsIt   the daemon exits within 700 ms
+#   GpuBackend.EglDaemonServesVoronoiGpuWithBruteForceAnswers   llvmpipe frames in a 60 s timeout
+timing_tests='^(Daemon\.SigtermLetsAFrameInFlightFinish|Daemon\.DrainDeadlineCancelsWorkThatOutlastsIt|GpuBackend\.EglDaemonServesVoronoiGpuWithBruteForceAnswers)$'
+
+install_done=0
+ensure_packages() {
+  if [ $install_done -eq 0 ]; then
+    bash "$here/deploy/setup.sh" --deps
+    install_done=1
+  fi
+}
+
+stage_release() {
+  begin release "release preset, whole suite"
+  local t0
+  t0=$(date +%s)
+  bash "$here/deploy/setup.sh"
+  install_done=1
+  local build_s
+  build_s=$(seconds_since "$t0")
+  t0=$(date +%s)
+  ctest --preset release -j "$jobs"
+  end "build ${build_s}s, tests $(seconds_since "$t0")s"
+}
+
+stage_asan() {
+  begin asan "AddressSanitizer + UBSan + LeakSanitizer, whole suite"
+  ensure_packages
+  local t0
+  t0=$(date +%s)
+  build_preset asan
+  local build_s
+  build_s=$(seconds_since "$t0")
+  t0=$(date +%s)
+  local logs="$here/build/asan/sanitizer-reports"
+  # halt_on_error: the first report ends the process (a test fails rather than scrolls on).
+  # detect_leaks: LeakSanitizer at every sanitized process's normal exit.
+  ASAN_OPTIONS="halt_on_error=1:detect_leaks=1:log_path=$logs/asan" \
+    LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0" \
+    UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:log_path=$logs/ubsan" \
+    run_sanitized_ctest "$logs" ctest --preset asan -j "$jobs" -E "$timing_tests"
+  end "build ${build_s}s, tests $(seconds_since "$t0")s"
+}
+
+stage_tsan() {
+  begin tsan "ThreadSanitizer, the daemon's concurrency tests (label integration)"
+  ensure_packages
+  local t0
+  t0=$(date +%s)
+  # Only what the daemon's tests need: configure once to list the hardening executables (one per
+  # tests/hardening/test_*.cpp), then build them with the daemon, the CLI and the other tests
+  # that start a daemon.
+  build_preset tsan proximad
+  local targets=(proximad proxima proxima_integration_tests proxima_client_e2e_tests
+                 proxima_api_doc_example)
+  while read -r t; do
+    targets+=("$t")
+  done < <(cmake --build --preset tsan --target help | sed -n 's/^\(proxima_hardening_[A-Za-z0-9_]*\): .*/\1/p')
+  build_preset tsan "${targets[@]}"
+  # Preloaded below: absl::Mutex made visible to TSan (tests/sanitizers/absl_mutex_tsan.cpp).
+  c++ -std=c++20 -O1 -fPIC -shared -o build/tsan/libabsl_mutex_tsan.so \
+    tests/sanitizers/absl_mutex_tsan.cpp -ldl
+  local build_s
+  build_s=$(seconds_since "$t0")
+  t0=$(date +%s)
+  local logs="$here/build/tsan/sanitizer-reports"
+  # halt_on_error + exitcode: a race ends the process with status 66, whoever it is (a test
+  # executable fails; a daemon dies under its test and leaves its report file).
+  # ignore_noninstrumented_modules, the preloaded absl::Mutex annotations and taskset -c 0 (oneTBB
+  # then starts no worker thread) are for Debian's uninstrumented gRPC, Abseil and oneTBB; see
+  # tests/sanitizers/tsan.supp.
+  TSAN_OPTIONS="halt_on_error=1:exitcode=66:second_deadlock_stack=1:ignore_noninstrumented_modules=1:suppressions=$supp/tsan.supp:log_path=$logs/tsan" \
+    LD_PRELOAD="$here/build/tsan/libabsl_mutex_tsan.so" \
+    run_sanitized_ctest "$logs" taskset -c 0 ctest --preset tsan -j "$jobs" -E "$timing_tests"
+  end "build ${build_s}s, tests $(seconds_since "$t0")s"
+}
+
+stage_fuzz() {
+  begin fuzz "fuzz smoke run (tests/fuzz/smoke.sh)"
+  ensure_packages
+  if [ ! -f "$here/tests/fuzz/smoke.sh" ]; then
+    echo "tests/fuzz/smoke.sh is not in this tree: nothing to run"
+    end "skipped (no tests/fuzz/smoke.sh)"
+    return 0
+  fi
+  bash "$here/tests/fuzz/smoke.sh"
+  end ""
+}
+
+for s in "${stages[@]}"; do
+  "stage_$s"
+done
