@@ -34,6 +34,13 @@ template <typename Fn>
 Fn real(const char* name) {
     void* f = dlsym(RTLD_NEXT, name);
     if (f == nullptr) {
+        // Abseil loaded with RTLD_LOCAL (a Python extension's dependency) is not in the global
+        // scope that RTLD_NEXT searches: ask the library itself.
+        if (void* lib = dlopen("libabsl_synchronization.so.20220623", RTLD_NOW)) {
+            f = dlsym(lib, name);
+        }
+    }
+    if (f == nullptr) {
         std::fprintf(stderr, "absl_mutex_tsan: %s not found\n", name);
         std::abort();
     }
