@@ -612,6 +612,21 @@ TEST(MeshIo, GlbLengthsBeyondTheFileAreRefused) {
     expect_error_naming(read_mesh(long_path), long_path, "the header declares 1000 bytes");
 }
 
+// Debian's assimp asks for 2^32 faces (64 GiB) for a strip or loop with too few vertices: such
+// primitives are refused first, whatever the JSON's bytes (assimp does not validate UTF-8).
+TEST(MeshIo, GltfStripsWithTooFewVerticesAreRefused) {
+    const std::string gltf =
+        R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],)"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"NORMAL\xff\":0},\"mode\":3}]}]}";
+    const std::string path = temp_path("strip.gltf");
+    write_bytes(path, gltf);
+    expect_error_naming(read_mesh(path), path, "mode 3 needs 2 vertices at least, it has 0");
+    const auto memory = read_mesh_from_memory(gltf, "gltf", "strip.gltf");
+    ASSERT_FALSE(memory.ok());
+    EXPECT_NE(memory.status().message().find("mode 3"), std::string::npos)
+        << memory.status().to_string();
+}
+
 // In memory, nothing but the buffer is read: a .gltf's external buffer is not found.
 TEST(MeshIo, FromMemoryReadsNoOtherFile) {
     const std::string bin = temp_path("external.bin");

@@ -20,6 +20,8 @@
 #include <assimp/scene.h>
 #include <assimp/Importer.hpp>
 
+#include <nlohmann/json.hpp>
+
 #include "io/ply_off.hpp"
 
 namespace proxima {
@@ -305,6 +307,95 @@ Status check_glb(std::string_view data, const std::string& name) {
     return {};
 }
 
+// The glTF document of a .gltf (the whole file) or a .glb (its first chunk, when the header
+// checked by check_glb says it is JSON); empty for other formats.
+std::string_view gltf_json(std::string_view data, std::string_view format) {
+    if (format == "gltf") {
+        return data;
+    }
+    if (format != "glb" || data.size() < 20 || data.substr(0, 4) != "glTF") {
+        return {};
+    }
+    const std::size_t length = little_u32(data, 12);
+    if (little_u32(data, 4) == 2 && data.substr(16, 4) == "JSON" && length <= data.size() - 20) {
+        return data.substr(20, length);
+    }
+    return {};
+}
+
+// Debian's assimp 5.2.5 computes a strip's or a loop's face count as (vertices - 1) or
+// (vertices - 2) in unsigned arithmetic: a line strip, line loop, triangle strip or triangle fan
+// with too few vertices (none, when POSITION is missing) asks for 2^32 faces, a 64 GiB
+// allocation (fuzz_mesh: a 1 KB .glb). Such primitives are refused before assimp reads the file.
+// `json` is the glTF document (a .gltf file, or a .glb's JSON chunk); a document that does not
+// parse is left to assimp, which refuses it.
+Status check_gltf_primitives(std::string_view json, const std::string& name) {
+    // assimp's JSON parser does not validate UTF-8 and nlohmann's does: bytes above 0x7f become
+    // 'x' here (every key and number this check reads is ASCII, and JSON's structure is too).
+    std::string ascii(json);
+    std::replace_if(
+        ascii.begin(), ascii.end(), [](char c) { return static_cast<unsigned char>(c) > 0x7f; },
+        'x');
+    const auto doc = nlohmann::json::parse(ascii, nullptr, false);
+    if (doc.is_discarded() || !doc.is_object()) {
+        return {};
+    }
+    const auto count_of = [&](const nlohmann::json& index) -> std::uint64_t {
+        const auto accessors = doc.find("accessors");
+        if (!index.is_number_unsigned() || accessors == doc.end() || !accessors->is_array() ||
+            index.get<std::uint64_t>() >= accessors->size()) {
+            return 0;
+        }
+        const auto& accessor = (*accessors)[index.get<std::size_t>()];
+        const auto count = accessor.is_object() ? accessor.find("count") : accessor.end();
+        return count != accessor.end() && count->is_number_unsigned() ? count->get<std::uint64_t>()
+                                                                      : 0;
+    };
+    const auto meshes = doc.find("meshes");
+    if (meshes == doc.end() || !meshes->is_array()) {
+        return {};
+    }
+    for (std::size_t m = 0; m < meshes->size(); ++m) {
+        const auto& mesh = (*meshes)[m];
+        const auto primitives = mesh.is_object() ? mesh.find("primitives") : mesh.end();
+        if (primitives == mesh.end() || !primitives->is_array()) {
+            continue;
+        }
+        for (std::size_t p = 0; p < primitives->size(); ++p) {
+            const auto& primitive = (*primitives)[p];
+            if (!primitive.is_object()) {
+                continue;
+            }
+            const auto mode_field = primitive.find("mode");
+            const std::uint64_t mode =
+                mode_field != primitive.end() && mode_field->is_number_unsigned()
+                    ? mode_field->get<std::uint64_t>()
+                    : 4;
+            // LINE_LOOP 2, LINE_STRIP 3: two vertices at least; TRIANGLE_STRIP 5, TRIANGLE_FAN 6:
+            // three.
+            const std::uint64_t least = mode == 2 || mode == 3 ? 2 : mode == 5 || mode == 6 ? 3 : 0;
+            if (least == 0) {
+                continue;
+            }
+            std::uint64_t vertices = 0;
+            if (const auto indices = primitive.find("indices"); indices != primitive.end()) {
+                vertices = count_of(*indices);
+            } else if (const auto attributes = primitive.find("attributes");
+                       attributes != primitive.end() && attributes->is_object() &&
+                       attributes->contains("POSITION")) {
+                vertices = count_of(attributes->at("POSITION"));
+            }
+            if (vertices < least) {
+                return invalid_argument("mesh file '" + name + "': glTF mesh " + std::to_string(m) +
+                                        ", primitive " + std::to_string(p) + ": mode " +
+                                        std::to_string(mode) + " needs " + std::to_string(least) +
+                                        " vertices at least, it has " + std::to_string(vertices));
+            }
+        }
+    }
+    return {};
+}
+
 Status unsupported_format(const std::string& name, const std::string& format) {
     return invalid_argument("mesh file '" + name + "': unsupported format '" + format +
                             "' (accepted: " + std::string(ACCEPTED_MESH_FORMATS) + ")");
@@ -359,16 +450,22 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
             return unsupported_format(path, extension.empty() ? "(no extension)" : extension);
         }
     }
-    // A .glb is read once here to check its header (check_glb) before assimp reads it.
+    // A .glb or .gltf is read once here to check it (check_glb, check_gltf_primitives) before
+    // assimp reads it.
     std::string data;
-    if (assimp && extension != ".glb") {
+    if (assimp && extension != ".glb" && extension != ".gltf") {
         return finish(read_with_assimp(path), path, options);
     }
     if (Status s = read_file(path, data); !s.ok()) {
         return s;
     }
     if (assimp) {
-        if (Status s = check_glb(data, path); !s.ok()) {
+        if (extension == ".glb") {
+            if (Status s = check_glb(data, path); !s.ok()) {
+                return s;
+            }
+        }
+        if (Status s = check_gltf_primitives(gltf_json(data, extension.substr(1)), path); !s.ok()) {
             return s;
         }
         return finish(read_with_assimp(path), path, options);
@@ -398,6 +495,9 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
         if (Status s = check_glb(data, name); !s.ok()) {
             return s;
         }
+    }
+    if (Status s = check_gltf_primitives(gltf_json(data, key), name); !s.ok()) {
+        return s;
     }
     return finish(read_memory_with_assimp(data, key, name), name, options);
 }
