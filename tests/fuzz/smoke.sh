@@ -30,7 +30,7 @@ for name in "${FUZZ_TARGETS[@]}"; do
     log="$FUZZ_BUILD/smoke-$name.log"
     rc=0
     # shellcheck disable=SC2046
-    "$FUZZ_BUILD/tests/fuzz/proxima_fuzz_$name" $(fuzz_options "$name") \
+    "$FUZZ_BUILD/tests/fuzz/proxima_fuzz_$name" $(fuzz_options "$name") -seed=1 \
         -max_total_time="$seconds" -artifact_prefix="$FUZZ_BUILD/artifacts/$name-" \
         "${inputs[@]}" >"$log" 2>&1 || rc=$?
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
