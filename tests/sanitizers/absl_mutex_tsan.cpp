@@ -62,73 +62,73 @@ void releasing(void* mu) {
 }  // namespace
 
 // Each function below has the mangled name of the absl::debian3 member it stands for.
-#define LOCK(sym)                                               \
-    extern "C" void sym(void* mu) {                             \
-        static const auto fn = real<void (*)(void*)>(#sym);     \
-        fn(mu);                                                 \
-        acquired(mu);                                           \
+#define LOCK(sym)                                           \
+    extern "C" void sym(void* mu) {                         \
+        static const auto fn = real<void (*)(void*)>(#sym); \
+        fn(mu);                                             \
+        acquired(mu);                                       \
     }
-#define UNLOCK(sym)                                             \
-    extern "C" void sym(void* mu) {                             \
-        static const auto fn = real<void (*)(void*)>(#sym);     \
-        releasing(mu);                                          \
-        fn(mu);                                                 \
+#define UNLOCK(sym)                                         \
+    extern "C" void sym(void* mu) {                         \
+        static const auto fn = real<void (*)(void*)>(#sym); \
+        releasing(mu);                                      \
+        fn(mu);                                             \
     }
-#define TRY_LOCK(sym)                                           \
-    extern "C" bool sym(void* mu) {                             \
-        static const auto fn = real<bool (*)(void*)>(#sym);     \
-        const bool ok = fn(mu);                                 \
-        if (ok) {                                               \
-            acquired(mu);                                       \
-        }                                                       \
-        return ok;                                              \
+#define TRY_LOCK(sym)                                       \
+    extern "C" bool sym(void* mu) {                         \
+        static const auto fn = real<bool (*)(void*)>(#sym); \
+        const bool ok = fn(mu);                             \
+        if (ok) {                                           \
+            acquired(mu);                                   \
+        }                                                   \
+        return ok;                                          \
     }
 // Mutex::LockWhen(const Condition&) and its reader variant: held on return.
-#define LOCK_WHEN(sym)                                                       \
-    extern "C" void sym(void* mu, const void* cond) {                        \
-        static const auto fn = real<void (*)(void*, const void*)>(#sym);     \
-        fn(mu, cond);                                                        \
-        acquired(mu);                                                        \
+#define LOCK_WHEN(sym)                                                   \
+    extern "C" void sym(void* mu, const void* cond) {                    \
+        static const auto fn = real<void (*)(void*, const void*)>(#sym); \
+        fn(mu, cond);                                                    \
+        acquired(mu);                                                    \
     }
 // The timed variants: held on return whatever the bool says.
-#define LOCK_WHEN_TIMED(sym)                                                          \
-    extern "C" bool sym(void* mu, const void* cond, Duration t) {                     \
-        static const auto fn = real<bool (*)(void*, const void*, Duration)>(#sym);    \
-        const bool r = fn(mu, cond, t);                                               \
-        acquired(mu);                                                                 \
-        return r;                                                                     \
+#define LOCK_WHEN_TIMED(sym)                                                       \
+    extern "C" bool sym(void* mu, const void* cond, Duration t) {                  \
+        static const auto fn = real<bool (*)(void*, const void*, Duration)>(#sym); \
+        const bool r = fn(mu, cond, t);                                            \
+        acquired(mu);                                                              \
+        return r;                                                                  \
     }
 // Mutex::Await*: held on entry and on return, released while waiting.
-#define AWAIT(sym)                                                           \
-    extern "C" void sym(void* mu, const void* cond) {                        \
-        static const auto fn = real<void (*)(void*, const void*)>(#sym);     \
-        releasing(mu);                                                       \
-        fn(mu, cond);                                                        \
-        acquired(mu);                                                        \
+#define AWAIT(sym)                                                       \
+    extern "C" void sym(void* mu, const void* cond) {                    \
+        static const auto fn = real<void (*)(void*, const void*)>(#sym); \
+        releasing(mu);                                                   \
+        fn(mu, cond);                                                    \
+        acquired(mu);                                                    \
     }
-#define AWAIT_TIMED(sym)                                                              \
-    extern "C" bool sym(void* mu, const void* cond, Duration t) {                     \
-        static const auto fn = real<bool (*)(void*, const void*, Duration)>(#sym);    \
-        releasing(mu);                                                                \
-        const bool r = fn(mu, cond, t);                                               \
-        acquired(mu);                                                                 \
-        return r;                                                                     \
+#define AWAIT_TIMED(sym)                                                           \
+    extern "C" bool sym(void* mu, const void* cond, Duration t) {                  \
+        static const auto fn = real<bool (*)(void*, const void*, Duration)>(#sym); \
+        releasing(mu);                                                             \
+        const bool r = fn(mu, cond, t);                                            \
+        acquired(mu);                                                              \
+        return r;                                                                  \
     }
 // CondVar::Wait*(Mutex*): the mutex is released while waiting.
-#define CV_WAIT(sym)                                                   \
-    extern "C" void sym(void* cv, void* mu) {                          \
-        static const auto fn = real<void (*)(void*, void*)>(#sym);     \
-        releasing(mu);                                                 \
-        fn(cv, mu);                                                    \
-        acquired(mu);                                                  \
+#define CV_WAIT(sym)                                               \
+    extern "C" void sym(void* cv, void* mu) {                      \
+        static const auto fn = real<void (*)(void*, void*)>(#sym); \
+        releasing(mu);                                             \
+        fn(cv, mu);                                                \
+        acquired(mu);                                              \
     }
-#define CV_WAIT_TIMED(sym)                                                      \
-    extern "C" bool sym(void* cv, void* mu, Duration t) {                       \
-        static const auto fn = real<bool (*)(void*, void*, Duration)>(#sym);    \
-        releasing(mu);                                                          \
-        const bool r = fn(cv, mu, t);                                           \
-        acquired(mu);                                                           \
-        return r;                                                               \
+#define CV_WAIT_TIMED(sym)                                                   \
+    extern "C" bool sym(void* cv, void* mu, Duration t) {                    \
+        static const auto fn = real<bool (*)(void*, void*, Duration)>(#sym); \
+        releasing(mu);                                                       \
+        const bool r = fn(cv, mu, t);                                        \
+        acquired(mu);                                                        \
+        return r;                                                            \
     }
 
 LOCK(_ZN4absl7debian35Mutex4LockEv)
