@@ -46,6 +46,7 @@
 #include "integration/daemon_process.hpp"
 #include "integration/wire.hpp"
 #include "support/random_scenes.hpp"
+#include "support/sanitized.hpp"
 
 extern char** environ;
 
@@ -60,17 +61,7 @@ constexpr std::uint64_t MIB = 1 << 20;
 
 // Under AddressSanitizer freed memory sits in a quarantine (up to 256 MiB) and ThreadSanitizer
 // keeps shadow memory: RSS bounds only mean something without them. The other checks stay.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-constexpr bool SANITIZED = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
-constexpr bool SANITIZED = true;
-#else
-constexpr bool SANITIZED = false;
-#endif
-#else
-constexpr bool SANITIZED = false;
-#endif
+// (SANITIZED: support/sanitized.hpp)
 
 // ---- helpers --------------------------------------------------------------------------------
 

@@ -29,6 +29,7 @@
 #include "integration/daemon_process.hpp"
 #include "integration/wire.hpp"
 #include "support/random_scenes.hpp"
+#include "support/sanitized.hpp"
 
 namespace proxima::test {
 namespace {
@@ -40,17 +41,7 @@ using Clock = std::chrono::steady_clock;
 // 256 MiB) and ThreadSanitizer's shadow memory follows the heap's history: the 5% check only
 // means something without them. The other checks, and the leak check LeakSanitizer makes when
 // the daemon exits at the end, still apply.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-constexpr bool SANITIZED = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
-constexpr bool SANITIZED = true;
-#else
-constexpr bool SANITIZED = false;
-#endif
-#else
-constexpr bool SANITIZED = false;
-#endif
+// (SANITIZED: support/sanitized.hpp)
 
 // A number from /proc/PID/status ("VmRSS:", in kB; "Threads:"), 0 when absent.
 std::uint64_t proc_status(pid_t pid, const std::string& key) {
