@@ -652,7 +652,7 @@ int main(int argc, char** argv) {
                          "choice)")
             ->check(CLI::PositiveNumber);
         distance->add_flag("--json", dist.json, "Print one JSON object");
-        distance->add_option("files", dist.files, "Mesh files (OBJ, PLY, STL, OFF, glTF, ...)")
+        distance->add_option("files", dist.files, "Mesh files (PLY, OFF, OBJ, STL, glTF/GLB)")
             ->required();
 
         DemoArgs demo_args;

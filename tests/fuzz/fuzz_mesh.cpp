@@ -1,11 +1,11 @@
 // Fuzz target: the mesh formats the importer accepts (mesh_io.hpp's allowlist), through
 // read_mesh_from_memory, the same readers and checks as read_mesh. The first byte chooses the
-// format (and welding); the rest is the file. PLY and OFF are the engine's own readers; STL, glTF
-// and GLB are Debian's assimp (not instrumented: ASan sees its allocations, not its reads)
-// restricted to those importers, plus our conversion of its scene. OBJ has a target of its own,
-// fuzz_mesh_obj.cpp: assimp's OBJ importer allocates and clears a 4 MiB buffer per file, ~10 ms,
-// which would leave the other formats a fraction of the executions. A mesh that comes back must
-// satisfy what the engine relies on: triangles, indices in range, finite coordinates.
+// format (and welding); the rest is the file. PLY, OFF, glTF and GLB are the engine's own readers
+// (glTF since 2026-11-24: Debian's assimp crashed on inputs this target found); STL is Debian's
+// assimp (not instrumented: ASan sees its allocations, not its reads) restricted to its STL
+// importer, plus our conversion of its scene. OBJ has a target of its own, fuzz_mesh_obj.cpp. A
+// mesh that comes back must satisfy what the engine relies on: triangles, indices in range,
+// finite coordinates.
 
 #include <array>
 #include <cmath>

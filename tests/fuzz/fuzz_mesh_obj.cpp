@@ -1,7 +1,9 @@
-// Fuzz target: OBJ files, through read_mesh_from_memory (assimp's OBJ importer, restricted to the
-// allowlist, and our conversion of its scene). Separate from fuzz_mesh.cpp because each OBJ read
-// costs ~10 ms (assimp allocates and clears a 4 MiB stream buffer per file), so this target runs
-// ~100 times slower than the others. The promises checked are fuzz_mesh's.
+// Fuzz target: OBJ files, through read_mesh_from_memory: the engine's own OBJ reader
+// (engine/src/io/obj.cpp: statements, face corners, negative and forward references, polygon
+// triangulation by ear clipping). Until 2026-11-24 OBJ went through assimp, whose importer cost
+// ~10 ms per file (a 4 MiB buffer cleared per read) and crashed on an OBJ naming itself as its
+// material library; the target stayed separate from fuzz_mesh.cpp so that OBJ keeps its own
+// corpus and dictionary. The promises checked are fuzz_mesh's.
 
 #include <cmath>
 #include <cstdint>

@@ -1,6 +1,7 @@
 // read_mesh: native double-precision PLY and OFF (bit-exact coordinates, fan triangulation in
-// file order, any PLY layout), assimp for OBJ/STL/glTF, the format allowlist, the in-memory
-// entry point, and errors instead of crashes on bad input.
+// file order, any PLY layout), the native OBJ reader (double precision, triangulation of
+// non-convex polygons), assimp for STL, the format allowlist, the in-memory entry point, and
+// errors instead of crashes on bad input. The native glTF reader has its own file: test_gltf.cpp.
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -17,6 +18,7 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -486,7 +488,7 @@ TEST(MeshIo, OffScansAndCadParts) {
     }
 }
 
-TEST(MeshIo, StlAndGlbThroughAssimp) {
+TEST(MeshIo, StlThroughAssimpAndGlb) {
     const std::string dir = data_dir();
     if (dir.empty()) {
         GTEST_SKIP() << NO_DATA;
@@ -500,12 +502,10 @@ TEST(MeshIo, StlAndGlbThroughAssimp) {
                 stl->triangles.size(), stl->vertices.size());
 
     // The file's 29 meshes hold 75,730 triangles; its 67 mesh nodes instance them, and read_mesh
-    // places every instance (node transforms applied): 121,496 triangles with Debian's assimp.
+    // places every instance (node transforms applied): 121,496 triangles, as with Debian's assimp.
     const auto glb = read_mesh(dir + "/meshes/gltf/2CylinderEngine.glb");
     ASSERT_TRUE(glb.ok()) << glb.status().to_string();
-    EXPECT_GT(glb->triangles.size(), 0u);
-    EXPECT_TRUE(glb->triangles.size() == 121496u || glb->triangles.size() == 75730u)
-        << glb->triangles.size();
+    EXPECT_EQ(glb->triangles.size(), 121496u);
     std::printf("2CylinderEngine.glb: %zu triangles (75,730 in its meshes, before instancing)\n",
                 glb->triangles.size());
 }
@@ -515,10 +515,9 @@ TEST(MeshIo, StlAndGlbThroughAssimp) {
 
 const std::string TETRA_OBJ = "o tetra\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\n";
 
-TEST(MeshIo, ObjAndAsciiStlThroughAssimp) {
+TEST(MeshIo, ObjAndAsciiStl) {
     const std::string obj = temp_path("tetra.obj");
     write_bytes(obj, TETRA_OBJ);
-    // assimp gives every face corner its own vertex; welding restores the 4 shared ones.
     const auto read = read_mesh(obj);
     ASSERT_TRUE(read.ok()) << read.status().to_string();
     EXPECT_EQ(read->vertices.size(), 4u);
@@ -533,9 +532,8 @@ TEST(MeshIo, ObjAndAsciiStlThroughAssimp) {
     EXPECT_EQ(tri->triangles.size(), 1u);
 }
 
-// Debian's assimp crashes (SIGSEGV) on a material library whose first statement is a texture map;
-// geometry needs no materials, so none is read: not the one mtllib names, nor assimp's fall-back
-// (the .obj's name with .mtl) when that one is missing.
+// Material libraries are never read (Debian's assimp crashed on some, and on an OBJ naming itself
+// as its material library): the OBJ reader opens no other file and ignores mtllib/usemtl.
 TEST(MeshIo, ObjMaterialLibrariesAreNeverRead) {
     const std::string named_mtl = temp_path("bad_named.mtl");
     write_bytes(named_mtl, "map_emissive a\nmap_Kd b\n");
@@ -545,17 +543,165 @@ TEST(MeshIo, ObjMaterialLibrariesAreNeverRead) {
     ASSERT_TRUE(read.ok()) << read.status().to_string();
     EXPECT_EQ(read->triangles.size(), 2u);
 
-    const std::string fallback = temp_path("fallback.obj");
-    write_bytes(temp_path("fallback.mtl"), "map_Kd b\n");
-    write_bytes(fallback, "mtllib missing.mtl\n" + TETRA_OBJ);
-    const auto read_fallback = read_mesh(fallback);
-    ASSERT_TRUE(read_fallback.ok()) << read_fallback.status().to_string();
-    EXPECT_EQ(read_fallback->triangles.size(), 2u);
+    // An OBJ whose mtllib names itself (SIGSEGV in assimp; tests/fuzz/regressions/mesh/).
+    const std::string self = temp_path("self.obj");
+    write_bytes(self, "mtllib self.obj\nusemtl x\n" + TETRA_OBJ);
+    const auto read_self = read_mesh(self);
+    ASSERT_TRUE(read_self.ok()) << read_self.status().to_string();
+    EXPECT_EQ(read_self->triangles.size(), 2u);
 
-    // In memory, the OBJ itself was served as its fall-back material library.
     const auto memory = read_mesh_from_memory("mtllib l\nmap_emissive\n" + TETRA_OBJ, "obj", "m");
     ASSERT_TRUE(memory.ok()) << memory.status().to_string();
     EXPECT_EQ(memory->triangles.size(), 2u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Native OBJ
+
+TEST(MeshIo, ObjCoordinatesAreReadInDouble) {
+    // 0.1 and 1/3 are not floats: assimp (ai_real = float) rounded them.
+    const auto read = read_mesh_from_memory(
+        "v 0.1 0.3333333333333333 1e-300\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "obj", "d.obj");
+    ASSERT_TRUE(read.ok()) << read.status().to_string();
+    ASSERT_EQ(read->vertices.size(), 3u);
+    EXPECT_EQ(read->vertices[0].x, 0.1);
+    EXPECT_EQ(read->vertices[0].y, 0.3333333333333333);
+    EXPECT_EQ(read->vertices[0].z, 1e-300);
+}
+
+TEST(MeshIo, ObjSyntax) {
+    // Corners with texture and normal indices, negative (relative) and forward references, a
+    // continuation line, comments, CRLF line ends, w and colour values, points and lines dropped,
+    // statements that carry no geometry ignored.
+    const std::string obj =
+        "# comment\r\n"
+        "o thing\r\ng part\r\ns 1\r\nusemtl m\r\n"
+        "v 0 0 0 1\r\n"
+        "v 1 0 0 0.5 0.5 0.5\r\n"
+        "v 0 1 0\r\n"
+        "vt 0 0\r\nvn 0 0 1\r\n"
+        "f 1/1/1 2/1/1 3/1/1 # a comment after a face\r\n"
+        "f -3//1 -2//1 \\\r\n   -1//1\r\n"
+        "f 1 5 4\r\n"  // forward references: vertices 4 and 5 come below
+        "l 1 2\r\np 3\r\nf 1 2\r\n"
+        "v 0 0 1\r\nv +1e0 -0 1\r\n";
+    const auto read = read_mesh_from_memory(obj, "obj", "syntax.obj", no_weld());
+    ASSERT_TRUE(read.ok()) << read.status().to_string();
+    ASSERT_EQ(read->triangles.size(), 3u);
+    // Vertices in order of first use; unused ones are not kept.
+    ASSERT_EQ(read->vertices.size(), 5u);
+    EXPECT_EQ(read->triangles[0], (TriangleIndices{0, 1, 2}));
+    EXPECT_EQ(read->triangles[1], (TriangleIndices{0, 1, 2}));
+    EXPECT_EQ(read->triangles[2], (TriangleIndices{0, 3, 4}));
+    EXPECT_EQ(read->vertices[3].x, 1.0);
+    EXPECT_EQ(read->vertices[4].z, 1.0);
+}
+
+namespace {
+
+double triangle_area(const TriangleMesh& mesh, const TriangleIndices& t) {
+    const Vec3& a = mesh.vertices[t[0]];
+    const Vec3& b = mesh.vertices[t[1]];
+    const Vec3& c = mesh.vertices[t[2]];
+    const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z;
+    const double vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
+    const double x = uy * vz - uz * vy, y = uz * vx - ux * vz, z = ux * vy - uy * vx;
+    return 0.5 * std::sqrt(x * x + y * y + z * z);
+}
+
+double total_area(const TriangleMesh& mesh) {
+    double sum = 0;
+    for (const auto& t : mesh.triangles) {
+        sum += triangle_area(mesh, t);
+    }
+    return sum;
+}
+
+}  // namespace
+
+TEST(MeshIo, ObjPolygonsAreTriangulatedInsideThemselves) {
+    // A convex pentagon: the fan from its first corner, in order.
+    const auto convex = read_mesh_from_memory(
+        "v 0 0 0\nv 2 0 0\nv 3 1 0\nv 1 2 0\nv -1 1 0\nf 1 2 3 4 5\n", "obj", "c.obj");
+    ASSERT_TRUE(convex.ok()) << convex.status().to_string();
+    ASSERT_EQ(convex->triangles.size(), 3u);
+    EXPECT_EQ(convex->triangles[0], (TriangleIndices{0, 1, 2}));
+    EXPECT_EQ(convex->triangles[1], (TriangleIndices{0, 2, 3}));
+    EXPECT_EQ(convex->triangles[2], (TriangleIndices{0, 3, 4}));
+
+    // A U (a 3 x 2 rectangle less a 1 x 1 notch) in the plane x = 5, starting at a corner that
+    // does not see the whole polygon: the fan from it would cover the notch too (area 7, not 5).
+    const auto u_shape = read_mesh_from_memory(
+        "v 5 2 2\nv 5 2 1\nv 5 1 1\nv 5 1 2\nv 5 0 2\nv 5 0 0\nv 5 3 0\nv 5 3 2\n"
+        "f 1 2 3 4 5 6 7 8\n",
+        "obj", "u.obj");
+    ASSERT_TRUE(u_shape.ok()) << u_shape.status().to_string();
+    ASSERT_EQ(u_shape->triangles.size(), 6u);
+    EXPECT_DOUBLE_EQ(total_area(*u_shape), 5.0);
+
+    // A concave quad (an arrowhead, reflex at corner 4) with the opposite orientation.
+    const auto arrow =
+        read_mesh_from_memory("v 0 0 0\nv 0 4 0\nv 4 2 0\nv 1 2 0\nf 1 4 3 2\n", "obj", "a.obj");
+    ASSERT_TRUE(arrow.ok()) << arrow.status().to_string();
+    ASSERT_EQ(arrow->triangles.size(), 2u);
+    EXPECT_DOUBLE_EQ(total_area(*arrow), 5.0);  // 8 for the hull, less the notch's 3
+}
+
+TEST(MeshIo, ObjErrorsNameTheLine) {
+    const auto expect = [](const std::string& text, const std::string& fragment) {
+        const auto read = read_mesh_from_memory(text, "obj", "bad.obj");
+        ASSERT_FALSE(read.ok()) << text;
+        EXPECT_EQ(read.status().code(), StatusCode::invalid_argument);
+        EXPECT_NE(read.status().message().find(fragment), std::string::npos)
+            << read.status().to_string();
+        EXPECT_NE(read.status().message().find("'bad.obj'"), std::string::npos);
+    };
+    expect("v 0 0\n", "line 1: a vertex needs three coordinates");
+    expect("v 0 0 0\nv 1 x 0\n", "line 2: 'x' is not a number");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "line 4: vertex 4 of 3");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n", "line 4: vertex -4 of 3 read so far");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "'0' is not a face corner");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3x\n", "'3x' is not a face corner");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n", "is not a face corner");
+    // No triangles at all, or not finite: validate_mesh's errors.
+    expect("v 0 0 0\nv 1 0 0\nf 1 2\n", "bad.obj");
+    expect("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "bad.obj");
+}
+
+// Every OBJ file of the shared data reads, with one triangle less than corners per polygon
+// (faces with fewer than three corners dropped), and welded.
+TEST(MeshIo, EverySharedObjFileReads) {
+    const std::string dir = data_dir();
+    if (dir.empty()) {
+        GTEST_SKIP() << NO_DATA;
+    }
+    std::size_t files = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(dir + "/meshes")) {
+        if (entry.path().extension() != ".obj") {
+            continue;
+        }
+        ++files;
+        const std::string text = read_bytes(entry.path().string());
+        std::size_t expected = 0;
+        std::istringstream lines(text);
+        for (std::string line; std::getline(lines, line);) {
+            std::istringstream words(line);
+            std::string keyword;
+            words >> keyword;
+            if (keyword != "f") {
+                continue;
+            }
+            std::size_t corners = 0;
+            for (std::string corner; words >> corner && corner[0] != '#';) {
+                ++corners;
+            }
+            expected += corners >= 3 ? corners - 2 : 0;
+        }
+        const auto read = read_mesh(entry.path().string());
+        ASSERT_TRUE(read.ok()) << read.status().to_string();
+        EXPECT_EQ(read->triangles.size(), expected) << entry.path();
+    }
+    EXPECT_GE(files, 500u);
 }
 
 // Assimp would read these (by content, or by its ~40 other importers); the allowlist refuses
@@ -612,19 +758,25 @@ TEST(MeshIo, GlbLengthsBeyondTheFileAreRefused) {
     expect_error_naming(read_mesh(long_path), long_path, "the header declares 1000 bytes");
 }
 
-// Debian's assimp asks for 2^32 faces (64 GiB) for a strip or loop with too few vertices: such
-// primitives are refused first, whatever the JSON's bytes (assimp does not validate UTF-8).
-TEST(MeshIo, GltfStripsWithTooFewVerticesAreRefused) {
+// Debian's assimp asked for 2^32 faces (64 GiB) for a strip or loop with too few vertices. The
+// native reader adds nothing for such a primitive (the file then has no triangles), and refuses
+// JSON that is not UTF-8 (assimp did not check) naming the byte.
+TEST(MeshIo, GltfStripsWithTooFewVerticesAddNothing) {
     const std::string gltf =
         R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],)"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"NORMAL\xff\":0},\"mode\":3}]}]}";
+        R"("meshes":[{"primitives":[{"attributes":{"NORMAL":0},"mode":5}]}]})";
     const std::string path = temp_path("strip.gltf");
     write_bytes(path, gltf);
-    expect_error_naming(read_mesh(path), path, "mode 3 needs 2 vertices at least, it has 0");
+    expect_error_naming(read_mesh(path), path, "mesh has no triangles");
     const auto memory = read_mesh_from_memory(gltf, "gltf", "strip.gltf");
     ASSERT_FALSE(memory.ok());
-    EXPECT_NE(memory.status().message().find("mode 3"), std::string::npos)
+    EXPECT_NE(memory.status().message().find("mesh has no triangles"), std::string::npos)
         << memory.status().to_string();
+
+    std::string not_utf8 = gltf;
+    not_utf8.insert(not_utf8.find("NORMAL") + 6, "\xff");
+    write_bytes(path, not_utf8);
+    expect_error_naming(read_mesh(path), path, "not valid UTF-8");
 }
 
 // In memory, nothing but the buffer is read: a .gltf's external buffer is not found.

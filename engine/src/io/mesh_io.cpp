@@ -20,8 +20,8 @@
 #include <assimp/scene.h>
 #include <assimp/Importer.hpp>
 
-#include <nlohmann/json.hpp>
-
+#include "io/gltf.hpp"
+#include "io/obj.hpp"
 #include "io/ply_off.hpp"
 
 namespace proxima {
@@ -136,11 +136,21 @@ std::string read_head(const std::string& path) {
     return head;
 }
 
-// The formats read through assimp; every other assimp importer is removed before reading, so a
-// file can never reach one of the ~40 importers nobody fuzzes (not even through assimp's
-// fall-back detection by content). Debian's assimp is not instrumented: the allowlist keeps the
-// attack surface to the formats the project tests and fuzzes.
-constexpr std::array<std::string_view, 4> ASSIMP_FORMATS = {"obj", "stl", "gltf", "glb"};
+// The formats read through assimp: STL only. Every other assimp importer is removed before
+// reading, so a file can never reach one of the ~40 importers nobody fuzzes (not even through
+// assimp's fall-back detection by content). OBJ and glTF went through assimp until fuzzing found
+// crashes in Debian's assimp 5.2.5 for both (docs/reliability.md, "Fuzzing"); they have readers
+// of their own now (obj.cpp, gltf.cpp), like PLY and OFF.
+constexpr std::array<std::string_view, 1> ASSIMP_FORMATS = {"stl"};
+
+// The formats with a reader of our own, by extension.
+enum class OwnReader { none, obj, gltf, glb };
+OwnReader own_reader(std::string_view format) {
+    return format == "obj"    ? OwnReader::obj
+           : format == "gltf" ? OwnReader::gltf
+           : format == "glb"  ? OwnReader::glb
+                              : OwnReader::none;
+}
 
 std::string lower(std::string_view text) {
     std::string out(text);
@@ -153,29 +163,9 @@ bool is_assimp_format(std::string_view format) {
     return std::find(ASSIMP_FORMATS.begin(), ASSIMP_FORMATS.end(), format) != ASSIMP_FORMATS.end();
 }
 
-// Material libraries are never read. Debian's assimp 5.2.5 crashes (a write through a null
-// material) on an .mtl whose first statement is a texture map, such as "map_Kd a" before any
-// "newmtl": `proxima distance x.obj` died with SIGSEGV when x.obj named such a file, or when its
-// mtllib was missing and x.mtl beside it held one (assimp's fall-back name). Found by fuzz_mesh.
-// Geometry never needs materials, so no importer may open an .mtl.
-bool is_material_library(const char* file) {
-    const std::string name = lower(file == nullptr ? "" : file);
-    return name.size() >= 4 && name.compare(name.size() - 4, 4, ".mtl") == 0;
-}
-
-class GeometryFileSystem : public Assimp::DefaultIOSystem {
-  public:
-    bool Exists(const char* file) const override {
-        return !is_material_library(file) && DefaultIOSystem::Exists(file);
-    }
-    Assimp::IOStream* Open(const char* file, const char* mode) override {
-        return is_material_library(file) ? nullptr : DefaultIOSystem::Open(file, mode);
-    }
-};
-
 // Serves the buffer under its own name only. assimp's MemoryIOSystem serves it under every name
-// that starts with its magic prefix, so an OBJ read from memory was also read as its own fall-back
-// material library ("<magic>.mtl"), and reached the crash above.
+// that starts with its magic prefix (an OBJ read from memory was read as its own fall-back
+// material library, "<magic>.mtl", when OBJ still went through assimp).
 class BufferOnlySystem : public Assimp::MemoryIOSystem {
   public:
     BufferOnlySystem(std::string_view data, std::string name)
@@ -193,7 +183,7 @@ class BufferOnlySystem : public Assimp::MemoryIOSystem {
 };
 
 // Unregisters (and frees: UnregisterLoader does not) every importer that claims none of
-// ASSIMP_FORMATS' extensions. The glTF 1.0 and 2.0 importers both claim .gltf/.glb and stay.
+// ASSIMP_FORMATS' extensions.
 void keep_allowed_importers(Assimp::Importer& importer) {
     std::vector<Assimp::BaseImporter*> refused;
     for (std::size_t i = 0; i < importer.GetImporterCount(); ++i) {
@@ -233,8 +223,6 @@ StatusOr<TriangleMesh> collect_scene(const Assimp::Importer& importer, const aiS
 StatusOr<TriangleMesh> read_with_assimp(const std::string& path) {
     Assimp::Importer importer;
     keep_allowed_importers(importer);
-    // From the file system, so that a .gltf's external buffers load; never an .mtl.
-    importer.SetIOHandler(new GeometryFileSystem());
     const aiScene* scene = importer.ReadFile(path, ASSIMP_FLAGS);
     return collect_scene(importer, scene, path);
 }
@@ -243,157 +231,11 @@ StatusOr<TriangleMesh> read_memory_with_assimp(std::string_view data, const std:
                                                const std::string& name) {
     Assimp::Importer importer;
     keep_allowed_importers(importer);
-    // An I/O system that serves only the buffer: references to other files (a .gltf's buffers, an
-    // .obj's .mtl) fail instead of reaching the file system.
+    // An I/O system that serves only the buffer: nothing else is read.
     const std::string magic = std::string(AI_MEMORYIO_MAGIC_FILENAME) + "." + format;
     importer.SetIOHandler(new BufferOnlySystem(data, magic));
     const aiScene* scene = importer.ReadFile(magic, ASSIMP_FLAGS);
     return collect_scene(importer, scene, name);
-}
-
-std::uint32_t little_u32(std::string_view data, std::size_t at) {
-    std::uint32_t v = 0;
-    for (int b = 3; b >= 0; --b) {
-        v = (v << 8) | static_cast<unsigned char>(data[at + static_cast<std::size_t>(b)]);
-    }
-    return v;
-}
-
-// Debian's assimp 5.2.5 sizes its buffers from a binary glTF's header before comparing them with
-// the file: a 49-byte .glb whose JSON chunk claimed 687 MB took 5 s and 800 MB (fuzz_mesh,
-// tests/fuzz/regressions/mesh/). Every length in the header and chunk headers must fit in the
-// bytes that are there. Other problems (magic, versions, chunk types) are left to assimp.
-Status check_glb(std::string_view data, const std::string& name) {
-    const auto error = [&](const std::string& what) {
-        return invalid_argument("mesh file '" + name + "': binary glTF: " + what);
-    };
-    if (data.size() < 12) {
-        return error("the file is " + std::to_string(data.size()) +
-                     " bytes, shorter than the 12-byte header");
-    }
-    if (data.substr(0, 4) != "glTF") {
-        return {};
-    }
-    const std::uint32_t version = little_u32(data, 4);
-    const std::uint64_t length = little_u32(data, 8);
-    if (length > data.size()) {
-        return error("the header declares " + std::to_string(length) + " bytes, the file holds " +
-                     std::to_string(data.size()));
-    }
-    if (version == 1) {
-        // glTF 1.0 (KHR_binary_glTF): a 20-byte header, then the scene's JSON.
-        if (data.size() < 20) {
-            return error("the file is " + std::to_string(data.size()) +
-                         " bytes, shorter than the 20-byte glTF 1.0 header");
-        }
-        const std::uint64_t content = little_u32(data, 12);
-        if (content > data.size() - 20) {
-            return error("the scene declares " + std::to_string(content) + " bytes, " +
-                         std::to_string(data.size() - 20) + " follow the header");
-        }
-        return {};
-    }
-    // glTF 2.0: chunks of (length, type, data) after the 12-byte header.
-    std::size_t at = 12;
-    while (data.size() - at >= 8) {
-        const std::uint64_t chunk = little_u32(data, at);
-        if (chunk > data.size() - at - 8) {
-            return error("the chunk at byte " + std::to_string(at) + " declares " +
-                         std::to_string(chunk) + " bytes, " + std::to_string(data.size() - at - 8) +
-                         " follow it");
-        }
-        at += 8 + static_cast<std::size_t>(chunk);
-    }
-    return {};
-}
-
-// The glTF document of a .gltf (the whole file) or a .glb (its first chunk, when the header
-// checked by check_glb says it is JSON); empty for other formats.
-std::string_view gltf_json(std::string_view data, std::string_view format) {
-    if (format == "gltf") {
-        return data;
-    }
-    if (format != "glb" || data.size() < 20 || data.substr(0, 4) != "glTF") {
-        return {};
-    }
-    const std::size_t length = little_u32(data, 12);
-    if (little_u32(data, 4) == 2 && data.substr(16, 4) == "JSON" && length <= data.size() - 20) {
-        return data.substr(20, length);
-    }
-    return {};
-}
-
-// Debian's assimp 5.2.5 computes a strip's or a loop's face count as (vertices - 1) or
-// (vertices - 2) in unsigned arithmetic: a line strip, line loop, triangle strip or triangle fan
-// with too few vertices (none, when POSITION is missing) asks for 2^32 faces, a 64 GiB
-// allocation (fuzz_mesh: a 1 KB .glb). Such primitives are refused before assimp reads the file.
-// `json` is the glTF document (a .gltf file, or a .glb's JSON chunk); a document that does not
-// parse is left to assimp, which refuses it.
-Status check_gltf_primitives(std::string_view json, const std::string& name) {
-    // assimp's JSON parser does not validate UTF-8 and nlohmann's does: bytes above 0x7f become
-    // 'x' here (every key and number this check reads is ASCII, and JSON's structure is too).
-    std::string ascii(json);
-    std::replace_if(
-        ascii.begin(), ascii.end(), [](char c) { return static_cast<unsigned char>(c) > 0x7f; },
-        'x');
-    const auto doc = nlohmann::json::parse(ascii, nullptr, false);
-    if (doc.is_discarded() || !doc.is_object()) {
-        return {};
-    }
-    const auto count_of = [&](const nlohmann::json& index) -> std::uint64_t {
-        const auto accessors = doc.find("accessors");
-        if (!index.is_number_unsigned() || accessors == doc.end() || !accessors->is_array() ||
-            index.get<std::uint64_t>() >= accessors->size()) {
-            return 0;
-        }
-        const auto& accessor = (*accessors)[index.get<std::size_t>()];
-        const auto count = accessor.is_object() ? accessor.find("count") : accessor.end();
-        return count != accessor.end() && count->is_number_unsigned() ? count->get<std::uint64_t>()
-                                                                      : 0;
-    };
-    const auto meshes = doc.find("meshes");
-    if (meshes == doc.end() || !meshes->is_array()) {
-        return {};
-    }
-    for (std::size_t m = 0; m < meshes->size(); ++m) {
-        const auto& mesh = (*meshes)[m];
-        const auto primitives = mesh.is_object() ? mesh.find("primitives") : mesh.end();
-        if (primitives == mesh.end() || !primitives->is_array()) {
-            continue;
-        }
-        for (std::size_t p = 0; p < primitives->size(); ++p) {
-            const auto& primitive = (*primitives)[p];
-            if (!primitive.is_object()) {
-                continue;
-            }
-            const auto mode_field = primitive.find("mode");
-            const std::uint64_t mode =
-                mode_field != primitive.end() && mode_field->is_number_unsigned()
-                    ? mode_field->get<std::uint64_t>()
-                    : 4;
-            // LINE_LOOP 2, LINE_STRIP 3: two vertices at least; TRIANGLE_STRIP 5, TRIANGLE_FAN 6:
-            // three.
-            const std::uint64_t least = mode == 2 || mode == 3 ? 2 : mode == 5 || mode == 6 ? 3 : 0;
-            if (least == 0) {
-                continue;
-            }
-            std::uint64_t vertices = 0;
-            if (const auto indices = primitive.find("indices"); indices != primitive.end()) {
-                vertices = count_of(*indices);
-            } else if (const auto attributes = primitive.find("attributes");
-                       attributes != primitive.end() && attributes->is_object() &&
-                       attributes->contains("POSITION")) {
-                vertices = count_of(attributes->at("POSITION"));
-            }
-            if (vertices < least) {
-                return invalid_argument("mesh file '" + name + "': glTF mesh " + std::to_string(m) +
-                                        ", primitive " + std::to_string(p) + ": mode " +
-                                        std::to_string(mode) + " needs " + std::to_string(least) +
-                                        " vertices at least, it has " + std::to_string(vertices));
-            }
-        }
-    }
-    return {};
 }
 
 Status unsupported_format(const std::string& name, const std::string& format) {
@@ -439,36 +281,54 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
         }
     }
     const std::string extension = lower(std::filesystem::path(path).extension().string());
-    // PLY and OFF are read natively, in double: Debian's assimp reads them at float precision.
-    // They are also recognised by content under any other extension (frames without one).
+    const std::string key = extension.empty() ? std::string() : extension.substr(1);
+    // PLY, OFF, OBJ and glTF are read by our own readers, in double: Debian's assimp reads at
+    // float precision. PLY and OFF are also recognised by content under any other extension
+    // (frames without one).
     detail::NativeMeshFormat format = detail::native_format_from_extension(path);
-    const bool assimp = format == detail::NativeMeshFormat::none && !extension.empty() &&
-                        is_assimp_format(extension.substr(1));
-    if (format == detail::NativeMeshFormat::none && !assimp) {
+    const OwnReader own = own_reader(key);
+    const bool assimp = !key.empty() && is_assimp_format(key);
+    if (format == detail::NativeMeshFormat::none && own == OwnReader::none && !assimp) {
         format = detail::native_format_from_content(read_head(path));
         if (format == detail::NativeMeshFormat::none) {
             return unsupported_format(path, extension.empty() ? "(no extension)" : extension);
         }
     }
-    // A .glb or .gltf is read once here to check it (check_glb, check_gltf_primitives) before
-    // assimp reads it.
-    std::string data;
-    if (assimp && extension != ".glb" && extension != ".gltf") {
+    if (assimp) {
         return finish(read_with_assimp(path), path, options);
     }
+    std::string data;
     if (Status s = read_file(path, data); !s.ok()) {
         return s;
     }
-    if (assimp) {
-        if (extension == ".glb") {
-            if (Status s = check_glb(data, path); !s.ok()) {
+    if (own == OwnReader::obj) {
+        return finish(detail::read_obj(path, data), path, options);
+    }
+    if (own == OwnReader::gltf || own == OwnReader::glb) {
+        // External buffers: files in the .gltf's own directory or below it, named relatively.
+        const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+        const detail::GltfBufferLoader load = [&](const std::string& uri) -> StatusOr<std::string> {
+            const std::filesystem::path relative(uri);
+            const bool leaves =
+                std::any_of(relative.begin(), relative.end(),
+                            [](const std::filesystem::path& part) { return part == ".."; });
+            if (uri.empty() || relative.is_absolute() || relative.has_root_name() || leaves) {
+                return invalid_argument(
+                    "mesh file '" + path + "': buffer '" + uri +
+                    "': only files beside the glTF file (or below it) are read");
+            }
+            const std::string file = (dir / relative).string();
+            std::error_code error;
+            if (!std::filesystem::is_regular_file(file, error)) {
+                return not_found("mesh file '" + path + "': buffer '" + uri + "': no such file");
+            }
+            std::string bytes;
+            if (Status s = read_file(file, bytes); !s.ok()) {
                 return s;
             }
-        }
-        if (Status s = check_gltf_primitives(gltf_json(data, extension.substr(1)), path); !s.ok()) {
-            return s;
-        }
-        return finish(read_with_assimp(path), path, options);
+            return bytes;
+        };
+        return finish(detail::read_gltf(path, data, own == OwnReader::glb, load), path, options);
     }
     return finish(format == detail::NativeMeshFormat::ply ? detail::read_ply(path, data)
                                                           : detail::read_off(path, data),
@@ -488,16 +348,24 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
     if (key == "off") {
         return finish(detail::read_off(name, data), name, options);
     }
+    switch (own_reader(key)) {
+        case OwnReader::obj:
+            return finish(detail::read_obj(name, data), name, options);
+        case OwnReader::gltf:
+        case OwnReader::glb: {
+            // Nothing but the bytes given is read: a .gltf's external buffers are not found.
+            const detail::GltfBufferLoader none =
+                [&](const std::string& uri) -> StatusOr<std::string> {
+                return not_found("mesh file '" + name + "': buffer '" + uri +
+                                 "': only buffers inside the data are read from memory");
+            };
+            return finish(detail::read_gltf(name, data, key == "glb", none), name, options);
+        }
+        case OwnReader::none:
+            break;
+    }
     if (!is_assimp_format(key)) {
         return unsupported_format(name, std::string(format));
-    }
-    if (key == "glb") {
-        if (Status s = check_glb(data, name); !s.ok()) {
-            return s;
-        }
-    }
-    if (Status s = check_gltf_primitives(gltf_json(data, key), name); !s.ok()) {
-        return s;
     }
     return finish(read_memory_with_assimp(data, key, name), name, options);
 }

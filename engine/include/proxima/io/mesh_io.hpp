@@ -2,17 +2,20 @@
 // Reading meshes from files. The engine sees only TriangleMesh: one indexed mesh per file.
 //
 // Formats: an allowlist, by extension (any case): PLY (ASCII, binary little and big endian), OFF
-// (ASCII), OBJ, STL (ASCII and binary), glTF 2.0 / 1.0 (.gltf, .glb). PLY and OFF are also
-// recognised by content under any other extension ("ply" first line, OFF keyword); every other
-// file is refused (invalid_argument naming the accepted formats), although the installed assimp
-// reads ~40 more: those importers are not fuzzed (tests/fuzz, docs/reliability.md), so no file
-// reaches them.
+// (ASCII), OBJ, STL (ASCII and binary), glTF 2.0 (.gltf, .glb; glTF 1.0 is refused). PLY and OFF
+// are also recognised by content under any other extension ("ply" first line, OFF keyword); every
+// other file is refused (invalid_argument naming the accepted formats), although the installed
+// assimp reads ~40 more: those importers are not fuzzed (tests/fuzz, docs/reliability.md), so no
+// file reaches them.
 //
-// Precision: PLY and OFF are read by our own readers and every coordinate is converted straight
-// to double, so double-precision files keep their exact values. OBJ, STL and glTF go through
-// assimp, which Debian builds with ai_real = float: those coordinates are float32 values widened
-// to double. Material libraries (.mtl) are never read: geometry needs none, and Debian's assimp
-// crashes on some (docs/reliability.md, "Fuzzing").
+// Readers: PLY, OFF, OBJ and glTF are the engine's own (engine/src/io/), and every coordinate is
+// converted straight to double, so double-precision files keep their exact values (glTF stores
+// float32; its node transforms are applied in double). STL goes through assimp, which Debian
+// builds with ai_real = float: binary STL is float32 anyway, ASCII STL is rounded to float32.
+// OBJ and glTF went through assimp until fuzzing found crashes in it (docs/reliability.md,
+// "Fuzzing"). No reader opens another file, except the glTF reader for a .gltf's external
+// buffers named relatively, beside the file or below it (read_mesh only). Material libraries
+// (.mtl) are never read.
 
 #include <string>
 #include <string_view>
@@ -31,8 +34,10 @@ struct MeshReadOptions {
 
 // Reads every triangle of the file, in file order within each mesh and mesh order within the
 // file. PLY/OFF polygons are triangulated as fans (v0, vi, vi+1), so triangle ids follow the
-// file; faces with fewer than 3 or out-of-range indices are errors. Through assimp, node
-// transforms are applied and points and lines dropped. Errors name the file and the problem:
+// file; faces with fewer than 3 or out-of-range indices are errors. OBJ polygons are triangulated
+// in face order, by ear clipping (a fan for convex ones), and faces with fewer than 3 corners are
+// dropped. glTF: every primitive of triangle mode in the default scene, node transforms applied,
+// points and lines dropped (engine/src/io/gltf.hpp). Errors name the file and the problem:
 // missing (not_found), unreadable, a format outside the allowlist, truncated or malformed data,
 // header counts the file cannot hold, no triangles, non-finite coordinates (all invalid_argument).
 StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options = {});
@@ -43,8 +48,8 @@ inline constexpr std::string_view ACCEPTED_MESH_FORMATS =
 
 // read_mesh on bytes already in memory; `format` is one of the accepted extensions, with or
 // without the dot, any case (no content detection), and `name` is used only in messages.
-// Nothing else is read: files the data refers to (a .gltf's external buffers, an .obj's .mtl)
-// are not found. The fuzz target tests/fuzz/fuzz_mesh.cpp reads through this.
+// Nothing else is read: files the data refers to (a .gltf's external buffers) are not found. The
+// fuzz target tests/fuzz/fuzz_mesh.cpp reads through this.
 StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
                                              const std::string& name,
                                              const MeshReadOptions& options = {});
