@@ -156,17 +156,6 @@ void run_frames(std::string_view rest, bool queries) {
         if (!frame.ParseFromArray(bytes.data(), static_cast<int>(bytes.size()))) {
             return;
         }
-        // The discrete-Voronoi cullers' sampling is neither bounded nor cancellable yet: one far
-        // vertex makes a frame run for seconds past its deadline (docs/reliability.md, "Open
-        // findings"; tests/fuzz/known/frames/). Until that is fixed, frames use the BVH culler
-        // instead (the automatic choice tries Voronoi on a scene's second frame), so that
-        // fuzzing keeps exploring the rest; build with PROXIMA_FUZZ_ALLOW_VORONOI defined to
-        // fuzz (or reproduce) it. Brute force stays as asked.
-#ifndef PROXIMA_FUZZ_ALLOW_VORONOI
-        if (frame.queries().culler() != v1::CULLER_BRUTE) {
-            frame.mutable_queries()->set_culler(v1::CULLER_BVH);
-        }
-#endif
         // The daemon's own bound on a frame's work is the call's deadline; CCD between
         // degenerate (coplanar, crossing) objects may use its whole per-test work bound, so a
         // frame of this small scene can take a second under ASan. A frame past its deadline
@@ -194,7 +183,7 @@ void run_frames(std::string_view rest, bool queries) {
     }
 }
 
-void create_scene(std::string_view rest) {
+[[maybe_unused]] void create_scene(std::string_view rest) {
     v1::CreateSceneRequest request;
     if (!request.ParseFromArray(rest.data(), static_cast<int>(rest.size()))) {
         return;
@@ -215,7 +204,7 @@ void create_scene(std::string_view rest) {
 }
 
 // [type:1][vertex byte count:2 LE][vertex bytes][index bytes]
-void upload(std::string_view rest) {
+[[maybe_unused]] void upload(std::string_view rest) {
     if (rest.size() < 3) {
         return;
     }
@@ -252,7 +241,7 @@ void upload(std::string_view rest) {
     check_charged(entry);
 }
 
-void review(std::string_view rest) {
+[[maybe_unused]] void review(std::string_view rest) {
     v1::ReviewRequest request;
     if (!request.ParseFromArray(rest.data(), static_cast<int>(rest.size()))) {
         return;

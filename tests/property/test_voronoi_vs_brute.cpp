@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <limits>
 
 #include "proxima/culling/dvd.hpp"
 #include "proxima/distance/primitives.hpp"
@@ -296,6 +297,40 @@ TEST(VoronoiVsBrute, FoldedSheetsCullAndAgree) {
 
 // Selection: names, the GPU precondition, a bad cell size, and `automatic` measuring both
 // candidates (never the GPU when none is set) and always answering like brute force.
+// Found by fuzz_frames (tests/fuzz/regressions/frames/): a tolerance near the largest double
+// overflowed the band's boxes to infinity and the bucket coordinates to NaN (SIGSEGV), and one far
+// vertex with a small cell made the sampling visit ~10^8 grid points (22 s under ASan, no deadline
+// check). Both now skip the Voronoi stage (VoronoiStats::skipped) and cull with the BVH alone:
+// the answers stay brute force's.
+TEST(VoronoiVsBrute, OverflowingBandsAndFarVerticesSkipSamplingAndStayExact) {
+    Rng rng(80100);
+    auto meshes = test::random_scene(rng);
+    for (const double tol : {1.7e308, std::numeric_limits<double>::max(), 1e300}) {
+        ProximityEngine vor;
+        ProximityEngine brute;
+        add_scene(vor, meshes);
+        add_scene(brute, meshes);
+        auto a = vor.query(full_request(CullerKind::voronoi_cpu, tol));
+        auto b = brute.query(full_request(CullerKind::brute, tol));
+        ASSERT_TRUE(a.ok()) << a.status().to_string();
+        ASSERT_TRUE(b.ok()) << b.status().to_string();
+        expect_equal_answers(vor.scene(), a.value(), b.value(), "tolerance " + std::to_string(tol));
+    }
+    // One vertex far away, a cell of 0.25: the grid coarsens to fit its 21-bit coordinates, and
+    // the slivers reaching the vertex span 2^20 cells of it, millions of grid points each.
+    ASSERT_FALSE(meshes.empty());
+    meshes[0].mesh.vertices[0].x = -9.3e61;
+    ProximityEngine vor;
+    ProximityEngine brute;
+    add_scene(vor, meshes);
+    add_scene(brute, meshes);
+    auto a = vor.query(full_request(CullerKind::voronoi_cpu, 0.2, 0.25));
+    auto b = brute.query(full_request(CullerKind::brute, 0.2));
+    ASSERT_TRUE(a.ok()) << a.status().to_string();
+    ASSERT_TRUE(b.ok()) << b.status().to_string();
+    expect_equal_answers(vor.scene(), a.value(), b.value(), "far vertex");
+}
+
 TEST(VoronoiVsBrute, SelectionAndErrors) {
     EXPECT_EQ(parse_culler("voronoi-cpu").value(), CullerKind::voronoi_cpu);
     EXPECT_EQ(parse_culler("voronoi-gpu").value(), CullerKind::voronoi_gpu);

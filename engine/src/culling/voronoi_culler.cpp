@@ -80,7 +80,18 @@ struct Job {
     double radius = 1.0;
 };
 
+// Sampling visits every grid point of every triangle's grown box. Far-apart coordinates with a
+// small cell (fuzz_frames: one vertex at -9.3e61) make those boxes hundreds of thousands of cells
+// long, and the sampling loop ran for 22 s under ASan against a 100 ms deadline. A job whose boxes
+// hold more grid points than this (a base plus an average per triangle; meshes at the median-edge
+// cell use tens to hundreds per triangle) is skipped: the culler then leaves every bound to the
+// BVH, which gives the same answers. Small scenes asked for a fine cell are skipped too: for them
+// the BVH alone is faster than sampling a quarter of a million points.
+constexpr std::uint64_t MAX_GRID_POINTS_BASE = std::uint64_t{1} << 18;
+constexpr std::uint64_t MAX_GRID_POINTS_PER_TRIANGLE = 1024;
+
 struct JobResult {
+    bool skipped = false;                // the sampling bound was exceeded; nothing else is set
     std::vector<std::size_t> offsets;    // first job triangle of each job object
     std::vector<double> lower;           // L(f)
     std::vector<double> upper;           // U(f), +inf when no sample found an eligible triangle
@@ -148,6 +159,46 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
     const double rho = h * std::sqrt(3.0) / 2.0 * (1.0 + 1e-12) + 4.0 * slack;
     const double R = job.radius;
     out.stats.cell = h;
+
+    // 0. The work bound: grid points in the triangles' boxes, counted before any is visited. A
+    // band radius whose boxes overflow (a tolerance near the largest double: fuzz_frames) culls
+    // nothing either: skipped too, before the bucket coordinates would turn NaN, and so is
+    // geometry beyond float's range.
+    {
+        // The kernel works in float, relative to the region's centre: the radius and the
+        // region's extent must stay well inside float's range too.
+        constexpr double FLOAT_SAFE = 1e36;
+        const Aabb reach = region.grown(job.radius * (1.0 + 1e-9) + 4.0 * slack);
+        bool finite = std::isfinite(job.radius) && job.radius < FLOAT_SAFE;
+        for (int a = 0; a < 3; ++a) {
+            finite = finite && std::isfinite(reach.lo[a]) && std::isfinite(reach.hi[a]) &&
+                     reach.hi[a] - reach.lo[a] < FLOAT_SAFE;
+        }
+        if (!finite) {
+            out.skipped = true;
+            out.stats.skipped = 1;
+            out.stats.seconds = seconds_since(t_start);
+            return {};
+        }
+        const double limit =
+            static_cast<double>(MAX_GRID_POINTS_BASE) +
+            static_cast<double>(MAX_GRID_POINTS_PER_TRIANGLE) * static_cast<double>(nt);
+        double points = 0;
+        for (std::size_t f = 0; f < nt && points <= limit; ++f) {
+            const Aabb box = triangle_box(tris[f][0], tris[f][1], tris[f][2]).grown(rho);
+            double in_box = 1;
+            for (int a = 0; a < 3; ++a) {
+                in_box *= std::max(0.0, std::floor(box.hi[a] / h) - std::ceil(box.lo[a] / h) + 1);
+            }
+            points += in_box;
+        }
+        if (!(points <= limit)) {
+            out.skipped = true;
+            out.stats.skipped = 1;
+            out.stats.seconds = seconds_since(t_start);
+            return {};
+        }
+    }
 
     // 1. Samples: Q_f for every triangle, in triangle order (deterministic).
     const std::size_t chunk = 256;
@@ -253,6 +304,9 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
     }
     auto bucket_coord = [&](double x, int a) {
         const double c = std::floor((x - sampled.lo[a]) / bsize);
+        if (std::isnan(c)) {
+            return std::uint32_t{0};  // unreachable with the finite boxes checked in step 0
+        }
         return static_cast<std::uint32_t>(std::clamp(c, 0.0, static_cast<double>(dims[a] - 1)));
     };
     const std::uint64_t nb = std::uint64_t{dims[0]} * dims[1] * dims[2];
@@ -507,6 +561,7 @@ void VoronoiCuller::add_stats(const VoronoiStats& s) {
     m_stats.samples += s.samples;
     m_stats.cell = s.cell;
     m_stats.epsilon = std::max(m_stats.epsilon, s.epsilon);
+    m_stats.skipped += s.skipped;
 }
 
 VoronoiStats VoronoiCuller::take_voronoi_stats() {
@@ -542,6 +597,9 @@ Status VoronoiCuller::refine_separation(const Scene& scene, std::vector<double>&
         return s;
     }
     add_stats(r.stats);
+    if (r.skipped) {
+        return {};  // m_separation stays invalid: nearest_between uses the BVH alone
+    }
     for (std::size_t i = 0; i < scene.size(); ++i) {
         for (std::size_t f = r.offsets[i]; f < r.offsets[i + 1]; ++f) {
             object_upper[i] = std::min(object_upper[i], r.upper[f]);
@@ -568,6 +626,9 @@ Status VoronoiCuller::refine_within(const Scene& scene, double radius) {
         return s;
     }
     add_stats(r.stats);
+    if (r.skipped) {
+        return {};  // m_within stays invalid: pairs_within keeps the BVH's pairs
+    }
     m_within.lower = std::move(r.lower);
     m_within.radius = radius;
     m_within.valid = true;
@@ -588,6 +649,9 @@ Status VoronoiCuller::refine_self(const Scene& scene, std::size_t a,
         return s;
     }
     add_stats(r.stats);
+    if (r.skipped) {
+        return {};  // no partners: the self query tests the BVH's pairs alone
+    }
     partner = std::move(r.partner);
     return {};
 }

@@ -68,6 +68,10 @@ struct VoronoiStats {
     std::uint64_t culled = 0;
     // Largest error allowance (kernel_error_bound + triangle_error_term) used.
     double epsilon = 0;
+    // Kernel runs skipped because their sampling would visit more grid points than allowed
+    // (MAX_GRID_POINTS in voronoi_culler.cpp): those queries cull with the BVH alone, with the
+    // same answers.
+    std::uint64_t skipped = 0;
 };
 
 class Culler {
