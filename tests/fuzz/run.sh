@@ -9,6 +9,8 @@
 # in build/fuzz/artifacts/; keep each one in tests/fuzz/regressions/TARGET/ once it is fixed.
 #
 #   bash tests/fuzz/run.sh TARGET SECONDS [JOBS]   # TARGET: ccd_queries, mesh, mesh_obj, request or frames
+#   FUZZ_FLAVOR=fast bash tests/fuzz/run.sh ...    # without ASan, in build/fuzz-fast (common.sh);
+#                                                  # its working corpus is replayed under ASan after
 #   bash tests/fuzz/run.sh --totals                # executions per target, summed over runs
 #   bash tests/fuzz/run.sh --merge TARGET          # minimize the working corpus into
 #                                                  # tests/fuzz/corpus/TARGET (-merge=1)
@@ -88,5 +90,21 @@ for log in "$logs"/fuzz-*.log; do
 done
 if [[ $rc -ne 0 ]]; then
     echo "fuzzing $name failed (exit $rc): see $logs and $FUZZ_BUILD/artifacts/" >&2
+fi
+# The fast flavour has no ASan: replay its working corpus (every input that added coverage) with
+# the ASan + UBSan build, so that a memory error on those inputs is still found.
+asan_binary="$FUZZ_ROOT/build/fuzz/tests/fuzz/proxima_fuzz_$name"
+if [[ "$FUZZ_FLAVOR" == fast ]]; then
+    if [[ -x "$asan_binary" ]]; then
+        replay=0
+        # shellcheck disable=SC2046
+        "$asan_binary" $(fuzz_options "$name") -runs=0 "$work" >"$logs/asan-replay.log" 2>&1 ||
+            replay=$?
+        echo "ASan replay of $(find "$work" -type f | wc -l) inputs of $work: exit $replay" \
+            "($logs/asan-replay.log)"
+        [[ $replay -eq 0 ]] || rc=$replay
+    else
+        echo "no ASan build ($asan_binary): the working corpus was not replayed under ASan" >&2
+    fi
 fi
 exit $rc
