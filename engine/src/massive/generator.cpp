@@ -1089,20 +1089,20 @@ bool is_mesh_file(const std::filesystem::path& path) {
     std::string ext = path.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    // PLY and OFF natively; the rest are formats Debian's assimp reads.
-    static const std::array<const char*, 9> EXTENSIONS = {".ply", ".off", ".obj", ".stl", ".gltf",
-                                                          ".glb", ".fbx", ".dae", ".3ds"};
+    // The formats read_mesh accepts (ACCEPTED_MESH_FORMATS); any other file would be refused.
+    static const std::array<const char*, 6> EXTENSIONS = {".ply", ".off",  ".obj",
+                                                          ".stl", ".gltf", ".glb"};
     return std::any_of(EXTENSIONS.begin(), EXTENSIONS.end(),
                        [&](const char* e) { return ext == e; });
 }
 
-// Formats whose convention is y up (Blender's OBJ export, glTF, COLLADA and FBX as assimp reads
-// them); PLY, OFF and STL are taken as z up.
+// Formats whose convention is y up (Blender's OBJ export, glTF); PLY, OFF and STL are taken as
+// z up.
 bool is_y_up(const std::filesystem::path& path) {
     std::string ext = path.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    return ext == ".obj" || ext == ".gltf" || ext == ".glb" || ext == ".fbx" || ext == ".dae";
+    return ext == ".obj" || ext == ".gltf" || ext == ".glb";
 }
 
 using IntMatrix = std::array<std::array<int, 3>, 3>;
