@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "proxima/io/mesh_io.hpp"
+#include "support/mesh_files.hpp"
 
 namespace proxima {
 namespace {
@@ -26,21 +27,9 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-MeshReadOptions no_weld() {
-    MeshReadOptions options;
-    options.weld_identical_positions = false;
-    return options;
-}
-
-std::string temp_path(const std::string& name) {
-    return ::testing::TempDir() + "proxima_gltf_" + std::to_string(::getpid()) + "_" + name;
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    ASSERT_TRUE(out.good()) << path;
-}
+using test::no_weld;
+using test::temp_path;
+using test::write_bytes;
 
 std::string base64(const std::string& bytes) {
     static const char* const ALPHABET =

@@ -23,33 +23,17 @@
 #include <vector>
 
 #include "proxima/io/mesh_io.hpp"
+#include "support/mesh_files.hpp"
 
 namespace proxima {
 namespace {
 
 namespace fs = std::filesystem;
 
-// Unique per process: ctest runs test cases as parallel processes sharing TempDir().
-std::string temp_path(const std::string& name) {
-    return ::testing::TempDir() + "proxima_mesh_io_" + std::to_string(::getpid()) + "_" + name;
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    ASSERT_TRUE(out.good()) << path;
-}
-
-std::string read_bytes(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-MeshReadOptions no_weld() {
-    MeshReadOptions options;
-    options.weld_identical_positions = false;
-    return options;
-}
+using test::no_weld;
+using test::read_bytes;
+using test::temp_path;
+using test::write_bytes;
 
 std::string g17(double v) {
     std::array<char, 40> buf{};
@@ -662,6 +646,8 @@ TEST(MeshIo, ObjErrorsNameTheLine) {
     expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n", "line 4: vertex -4 of 3 read so far");
     expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "'0' is not a face corner");
     expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3x\n", "'3x' is not a face corner");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 +-3\n", "'+-3' is not a face corner");
+    expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 0 \x01 0\n", "'\\x01' is not a number");
     expect("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n", "is not a face corner");
     // No triangles at all, or not finite: validate_mesh's errors.
     expect("v 0 0 0\nv 1 0 0\nf 1 2\n", "bad.obj");

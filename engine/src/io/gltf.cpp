@@ -15,6 +15,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "io/text.hpp"
+
 namespace proxima::detail {
 
 namespace {
@@ -53,25 +55,6 @@ bool is_supported_required_extension(std::string_view name) {
         "EXT_texture_webp",      "EXT_texture_avif",      "KHR_lights_punctual"};
     return std::find(KNOWN.begin(), KNOWN.end(), name) != KNOWN.end() ||
            name.starts_with("KHR_materials_");
-}
-
-// Text from the file as it may appear in a message: no control bytes, no megabytes.
-std::string printable(std::string_view text, std::size_t limit = 40) {
-    std::string out;
-    for (std::size_t i = 0; i < text.size() && i < limit; ++i) {
-        const auto c = static_cast<unsigned char>(text[i]);
-        if (c >= 0x20 && c < 0x7f) {
-            out += static_cast<char>(c);
-        } else {
-            std::array<char, 8> buf{};
-            std::snprintf(buf.data(), buf.size(), "\\x%02x", static_cast<unsigned>(c));
-            out += buf.data();
-        }
-    }
-    if (text.size() > limit) {
-        out += "...";
-    }
-    return out;
 }
 
 // A JSON value as a message shows it: scalars as written, containers by their type.

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "io/text.hpp"
+
 namespace proxima::detail {
 
 namespace {
@@ -97,33 +99,15 @@ std::string_view next_token(std::string_view& rest) {
     return token;
 }
 
-// 'token', built by appending (GCC 12 warns, wrongly, on "'" + std::string(token) under -O2).
-std::string quoted(std::string_view token) {
-    std::string out;
-    out.reserve(token.size() + 2);
-    out += '\'';
-    out += token;
-    out += '\'';
-    return out;
-}
-
-bool parse_double(std::string_view token, double& out) {
-    if (!token.empty() && token.front() == '+') {
-        token.remove_prefix(1);
-    }
-    if (token.empty()) {
-        return false;
-    }
-    const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), out);
-    return ec == std::errc() && end == token.data() + token.size();
-}
-
 // The vertex part of a face corner ("7", "7/2", "7//3", "7/2/3"); false when it is not an integer.
 bool parse_corner(std::string_view token, std::int64_t& out) {
     const std::size_t slash = token.find('/');
     std::string_view number = token.substr(0, slash);
     if (!number.empty() && number.front() == '+') {
         number.remove_prefix(1);
+        if (!number.empty() && number.front() == '-') {
+            return false;  // "+-3"
+        }
     }
     if (number.empty()) {
         return false;
@@ -285,7 +269,7 @@ StatusOr<TriangleMesh> read_obj(const std::string& name, std::string_view data) 
                     return error(line, "a vertex needs three coordinates");
                 }
                 if (!parse_double(token, c)) {
-                    return error(line, quoted(token) + " is not a number");
+                    return error(line, "'" + printable(token) + "' is not a number");
                 }
             }
             positions.push_back({xyz[0], xyz[1], xyz[2]});
@@ -295,7 +279,7 @@ StatusOr<TriangleMesh> read_obj(const std::string& name, std::string_view data) 
                  token = next_token(rest)) {
                 std::int64_t index = 0;
                 if (!parse_corner(token, index) || index == 0) {
-                    return error(line, quoted(token) + " is not a face corner");
+                    return error(line, "'" + printable(token) + "' is not a face corner");
                 }
                 if (index < 0) {
                     // Counts back from the last vertex read so far.

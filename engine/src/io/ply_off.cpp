@@ -16,6 +16,8 @@
 #include <system_error>
 #include <vector>
 
+#include "io/text.hpp"
+
 namespace proxima::detail {
 
 namespace {
@@ -31,27 +33,6 @@ bool is_space(char c) {
     return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\f' || c == '\v';
 }
 
-// A token as it may appear in a message: garbage input must not put control bytes or megabytes
-// of text into a status that ends up in logs and gRPC replies.
-std::string printable(std::string_view token) {
-    constexpr std::size_t LIMIT = 40;
-    std::string out;
-    for (std::size_t i = 0; i < token.size() && i < LIMIT; ++i) {
-        const auto c = static_cast<unsigned char>(token[i]);
-        if (c >= 0x20 && c < 0x7f) {
-            out += static_cast<char>(c);
-        } else {
-            std::array<char, 8> buf{};
-            std::snprintf(buf.data(), buf.size(), "\\x%02x", static_cast<unsigned>(c));
-            out += buf.data();
-        }
-    }
-    if (token.size() > LIMIT) {
-        out += "...";
-    }
-    return out;
-}
-
 std::string found(std::string_view token) {
     return token.empty() ? "found the end of the file" : "found '" + printable(token) + "'";
 }
@@ -60,34 +41,6 @@ std::string number(double value) {
     std::array<char, 32> buf{};
     std::snprintf(buf.data(), buf.size(), "%.17g", value);
     return buf.data();
-}
-
-// The whole token as a double. "nan" and "inf" are accepted here on purpose: validate_mesh then
-// rejects them with the vertex index, which is the more useful message.
-bool parse_double(std::string_view token, double& out) {
-    if (!token.empty() && token[0] == '+') {
-        token.remove_prefix(1);  // from_chars does not take a leading '+', C and Python write it
-        if (!token.empty() && (token[0] == '+' || token[0] == '-')) {
-            return false;
-        }
-    }
-    if (token.empty()) {
-        return false;
-    }
-    const char* last = token.data() + token.size();
-    const auto [ptr, ec] = std::from_chars(token.data(), last, out);
-    if (ptr != last) {
-        return false;
-    }
-    if (ec == std::errc::result_out_of_range) {
-        // from_chars leaves `out` alone on overflow and underflow; strtod gives the nearest
-        // double (0 or +-HUGE_VAL; an infinity is then rejected as non-finite).
-        const std::string copy(token);
-        char* end = nullptr;
-        out = std::strtod(copy.c_str(), &end);
-        return end == copy.c_str() + copy.size();
-    }
-    return ec == std::errc{};
 }
 
 bool parse_count(std::string_view token, std::uint64_t& out) {
