@@ -635,30 +635,38 @@ TEST_F(FaultsWithModels, StalledVerifyReaderDoesNotHoldUpOthers) {
 
 // ---- clients that vanish --------------------------------------------------------------------
 
-// Not a test on its own: the raw client that tests below start in a child process (this
-// executable, filtered to this test, with PROXIMA_FAULTS_CHILD_ADDRESS set) and kill with SIGKILL.
-// It opens a stream with a stream-owned scene of 100,000 triangles, sends frames with large
-// results, reads nothing, says "STALLED" and waits to be killed.
-TEST(FaultsChildProcess, StalledFrameReader) {
-    const char* address = std::getenv("PROXIMA_FAULTS_CHILD_ADDRESS");
-    if (address == nullptr) {
-        GTEST_SKIP() << "run by Faults.VanishingClientsFreeTheirStreamsAndScenes";
-    }
+// Not a test: the raw client that the tests below start in a child process (this executable with
+// PROXIMA_FAULTS_CHILD_ADDRESS set; main() below runs this instead of the tests) and kill with
+// SIGKILL. It opens a stream with a stream-owned scene of 100,000 triangles, sends frames with
+// large results, reads nothing, says "STALLED" and waits to be killed. Exits 1 with a message if
+// the daemon refuses it.
+int run_stalled_frame_reader(const char* address) {
+    auto fail = [](const char* what) {
+        std::fprintf(stderr, "stalled frame reader: %s\n", what);
+        return 1;
+    };
     auto channel = stalling_channel(address);
     auto stub = v1::Proximity::NewStub(channel);
     grpc::ClientContext context;
     auto stream = stub->StreamFrames(&context);
     v1::Frame first = self_points_frame("", 0);
     set_mesh(ball("big", {0, 0, 0}, BIG_RINGS, BIG_SEGMENTS), first.add_additions());
-    ASSERT_TRUE(stream->Write(first));
+    if (!stream->Write(first)) {
+        return fail("the first frame was not sent");
+    }
     v1::FrameResult r;
-    ASSERT_TRUE(stream->Read(&r));  // the scene exists; its id is r.scene_id()
+    if (!stream->Read(&r)) {  // the scene exists; its id is r.scene_id()
+        return fail("no result for the first frame");
+    }
     for (std::uint64_t k = 1; k <= 8; ++k) {
-        ASSERT_TRUE(stream->Write(self_points_frame(r.scene_id(), k)));
+        if (!stream->Write(self_points_frame(r.scene_id(), k))) {
+            return fail("a frame was not sent");
+        }
     }
     std::printf("STALLED\n");
     std::fflush(stdout);
     std::this_thread::sleep_for(300s);
+    return 0;
 }
 
 // Kills a client with SIGKILL `rounds` + 1 times, each time once its standard output holds
@@ -755,7 +763,7 @@ TEST(Faults, VanishingClientsFreeTheirStreamsAndScenes) {
     kill_clients(address, daemon.pid(), "proxima demo --server", demo, "", 5, 4, 300ms, 8 * MIB);
 
     // The raw client that stopped reading, with ~5.6 MiB results queued for it in the daemon.
-    ChildProcess::Options raw{{"/proc/self/exe", "--gtest_filter=FaultsChildProcess.*"},
+    ChildProcess::Options raw{{"/proc/self/exe"},
                               {"PROXIMA_FAULTS_CHILD_ADDRESS=" + address},
                               logs / "raw.out",
                               logs / "raw.err",
@@ -941,3 +949,12 @@ TEST_F(FaultsWithModels, DiskFullDuringImportKeepsThePreviousStore) {
 
 }  // namespace
 }  // namespace proxima::test
+
+// The tests, or the child helper above when a test started this executable as one.
+int main(int argc, char** argv) {
+    if (const char* address = std::getenv("PROXIMA_FAULTS_CHILD_ADDRESS")) {
+        return proxima::test::run_stalled_frame_reader(address);
+    }
+    ::testing::InitGoogleTest(&argc, argv);
+    return RUN_ALL_TESTS();
+}
