@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <limits>
 
-namespace proxima::massive::kd_detail {
+namespace proxima::massive::detail {
 
 namespace {
 
@@ -113,4 +113,4 @@ PieceGeometry PieceBuilder::make(std::span<const std::uint32_t> triangles) {
     return piece;
 }
 
-}  // namespace proxima::massive::kd_detail
+}  // namespace proxima::massive::detail

@@ -7,7 +7,7 @@
 
 #include "proxima/massive/store.hpp"
 
-namespace proxima::massive::kd_detail {
+namespace proxima::massive::detail {
 
 // Splits `mesh` (already validated) until every piece's piece_weight is at most
 // `max_piece_bytes`: the triangles of a node are halved at the median of their centres along the
@@ -30,4 +30,4 @@ class PieceBuilder {
     std::vector<std::uint32_t> m_local;  // object vertex -> piece vertex, or NONE
 };
 
-}  // namespace proxima::massive::kd_detail
+}  // namespace proxima::massive::detail

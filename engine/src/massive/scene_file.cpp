@@ -7,7 +7,7 @@
 
 #include "massive/store_format.hpp"
 
-namespace proxima::massive::scene_file_detail {
+namespace proxima::massive::detail {
 
 namespace {
 
@@ -27,7 +27,7 @@ StatusOr<SceneFile> parse_scene_file(const std::string& path) {
     auto bad = [&](const std::string& json_path, const std::string& what) {
         return invalid_argument(where + ": " + json_path + ": " + what);
     };
-    auto bytes = store_detail::read_whole_file(path);
+    auto bytes = detail::read_whole_file(path);
     if (!bytes.ok()) {
         if (bytes.status().code() == StatusCode::not_found) {
             return not_found(where + ": no such file");
@@ -141,4 +141,4 @@ StatusOr<SceneFile> parse_scene_file(const std::string& path) {
     return scene;
 }
 
-}  // namespace proxima::massive::scene_file_detail
+}  // namespace proxima::massive::detail

@@ -8,7 +8,7 @@
 
 #include "proxima/massive/model.hpp"
 
-namespace proxima::massive::scene_file_detail {
+namespace proxima::massive::detail {
 
 struct ScenePart {
     std::string mesh_key;
@@ -31,4 +31,4 @@ struct SceneFile {
 // files are not opened here.
 StatusOr<SceneFile> parse_scene_file(const std::string& path);
 
-}  // namespace proxima::massive::scene_file_detail
+}  // namespace proxima::massive::detail

@@ -33,7 +33,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-using namespace store_detail;
+using namespace detail;
 
 static_assert(sizeof(Vec3) == 24 && sizeof(TriangleIndices) == 12,
               "piece records are memcpy'd from these arrays");
@@ -446,8 +446,8 @@ Status StoreWriter::add(ModelObject object) {
     if (piece_weight(mesh.vertices.size(), mesh.triangles.size()) <= w.options.max_piece_bytes) {
         s = w.write_piece(index, mesh.vertices, mesh.triangles, nullptr);
     } else {
-        const auto split = kd_detail::kd_split(mesh, w.options.max_piece_bytes);
-        kd_detail::PieceBuilder builder(mesh);
+        const auto split = detail::kd_split(mesh, w.options.max_piece_bytes);
+        detail::PieceBuilder builder(mesh);
         for (std::size_t k = 0; k < split.size() && s.ok(); ++k) {
             const PieceGeometry piece = builder.make(split[k]);
             s = w.write_piece(index, piece.vertices, piece.triangles, &piece.source_triangles);
@@ -1203,7 +1203,7 @@ bool is_mesh_file_name(const fs::path& p) {
 struct ImportItem {
     std::string name;
     std::string mesh_path;                                         // a mesh file, or
-    const scene_file_detail::SceneObject* scene_object = nullptr;  // a scene object
+    const detail::SceneObject* scene_object = nullptr;  // a scene object
     std::string scene_path;
 };
 
@@ -1217,7 +1217,7 @@ StatusOr<StoreSummary> import_files(const std::vector<std::string>& inputs,
     }
     // Plan everything first: a bad scene file or a missing input fails before anything is
     // written.
-    std::vector<std::unique_ptr<scene_file_detail::SceneFile>> scenes;  // items point into them
+    std::vector<std::unique_ptr<detail::SceneFile>> scenes;  // items point into them
     std::vector<ImportItem> items;
     for (const auto& input : inputs) {
         std::error_code ec;
@@ -1253,12 +1253,12 @@ StatusOr<StoreSummary> import_files(const std::vector<std::string>& inputs,
                 items.push_back({name, path, nullptr, {}});
             }
         } else if (ends_with_ci(input, ".json")) {
-            auto scene = scene_file_detail::parse_scene_file(input);
+            auto scene = detail::parse_scene_file(input);
             if (!scene.ok()) {
                 return scene.status();
             }
             scenes.push_back(
-                std::make_unique<scene_file_detail::SceneFile>(std::move(scene).value()));
+                std::make_unique<detail::SceneFile>(std::move(scene).value()));
             for (const auto& o : scenes.back()->objects) {
                 items.push_back({o.name, {}, &o, input});
             }

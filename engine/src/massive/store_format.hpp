@@ -26,7 +26,7 @@
 
 #include "proxima/status.hpp"
 
-namespace proxima::massive::store_detail {
+namespace proxima::massive::detail {
 
 // Records are memcpy'd to and from disk: the format is little-endian.
 static_assert(std::endian::native == std::endian::little, "the store format is little-endian");
@@ -128,4 +128,4 @@ Status pread_all(int fd, void* data, std::size_t size, std::uint64_t offset, std
 // The whole file (NOT_FOUND when absent).
 StatusOr<std::string> read_whole_file(const std::string& path);
 
-}  // namespace proxima::massive::store_detail
+}  // namespace proxima::massive::detail

@@ -9,7 +9,7 @@
 
 #include "massive/store_format.hpp"
 
-namespace proxima::massive::store_detail {
+namespace proxima::massive::detail {
 
 std::string generation_name(std::uint64_t number) {
     char buf[32];
@@ -184,4 +184,4 @@ StatusOr<std::string> read_whole_file(const std::string& path) {
     return bytes;
 }
 
-}  // namespace proxima::massive::store_detail
+}  // namespace proxima::massive::detail
