@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "proxima/distance/bounds.hpp"
-#include "proxima/massive/overlap_graph.hpp"
+#include "proxima/massive/partition.hpp"
 
 namespace proxima::massive {
 namespace {

@@ -35,7 +35,7 @@
 #include <numeric>
 #include <queue>
 
-#include "proxima/massive/overlap_graph.hpp"
+#include "proxima/massive/partition.hpp"
 
 namespace proxima::massive {
 

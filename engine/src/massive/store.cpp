@@ -1202,7 +1202,7 @@ bool is_mesh_file_name(const fs::path& p) {
 // One object to import: a mesh file, or an object of a scene file.
 struct ImportItem {
     std::string name;
-    std::string mesh_path;                                         // a mesh file, or
+    std::string mesh_path;                              // a mesh file, or
     const detail::SceneObject* scene_object = nullptr;  // a scene object
     std::string scene_path;
 };
@@ -1257,8 +1257,7 @@ StatusOr<StoreSummary> import_files(const std::vector<std::string>& inputs,
             if (!scene.ok()) {
                 return scene.status();
             }
-            scenes.push_back(
-                std::make_unique<detail::SceneFile>(std::move(scene).value()));
+            scenes.push_back(std::make_unique<detail::SceneFile>(std::move(scene).value()));
             for (const auto& o : scenes.back()->objects) {
                 items.push_back({o.name, {}, &o, input});
             }

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "proxima/massive/cache.hpp"
-#include "proxima/massive/overlap_graph.hpp"
+#include "proxima/massive/partition.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/query/query.hpp"
 
