@@ -12,26 +12,12 @@ import unittest
 PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 TOL = 1e-6  # the elementary tests' default tolerance: a toi is in [true - TOL, true]
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import run_program, write_off  # noqa: E402
+
 
 def run(*args):
-    p = subprocess.run([PROXIMA, *args], capture_output=True, text=True, timeout=100)
-    # A negative return code is a signal: a crash, never acceptable.
-    assert p.returncode >= 0, f"proxima crashed with signal {-p.returncode}: {p.stderr}"
-    return p
-
-
-def write_off(path, parts):
-    verts, faces = [], []
-    for v, f in parts:
-        base = len(verts)
-        verts += v
-        faces += [tuple(base + i for i in t) for t in f]
-    with open(path, "w") as out:
-        out.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
-        for p in verts:
-            out.write(" ".join(repr(float(c)) for c in p) + "\n")
-        for t in faces:
-            out.write("3 " + " ".join(str(i) for i in t) + "\n")
+    return run_program(PROXIMA, *args, timeout=100)
 
 
 def plane(z=0.0):

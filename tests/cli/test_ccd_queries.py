@@ -12,13 +12,12 @@ import unittest
 PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 DATA = sys.argv[2] if len(sys.argv) > 2 else ""
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import run_program  # noqa: E402
+
 
 def run(*args):
-    p = subprocess.run([PROXIMA, "ccd-queries", *args], capture_output=True, text=True,
-                       timeout=240)
-    # A negative return code is a signal: a crash, never acceptable.
-    assert p.returncode >= 0, f"proxima crashed with signal {-p.returncode}: {p.stderr}"
-    return p
+    return run_program(PROXIMA, "ccd-queries", *args)
 
 
 def data_file(*parts):

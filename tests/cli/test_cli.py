@@ -12,40 +12,12 @@ import unittest
 PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 DATA = sys.argv[2] if len(sys.argv) > 2 else ""
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import box_mesh, run_program, strip_stats, write_off  # noqa: E402
+
 
 def run(*args):
-    p = subprocess.run([PROXIMA, *args], capture_output=True, text=True, timeout=240)
-    # A negative return code is a signal: a crash, never acceptable.
-    assert p.returncode >= 0, f"proxima crashed with signal {-p.returncode}: {p.stderr}"
-    return p
-
-
-def box_off(lo, hi):
-    v = [(hi[0] if k & 1 else lo[0], hi[1] if k & 2 else lo[1], hi[2] if k & 4 else lo[2])
-         for k in range(8)]
-    f = [(0, 2, 1), (1, 2, 3), (4, 5, 6), (5, 7, 6), (0, 1, 4), (1, 5, 4),
-         (2, 6, 3), (3, 6, 7), (0, 4, 2), (2, 4, 6), (1, 3, 5), (3, 7, 5)]
-    return v, f
-
-
-def write_off(path, parts):
-    verts, faces = [], []
-    for v, f in parts:
-        base = len(verts)
-        verts += v
-        faces += [tuple(base + i for i in t) for t in f]
-    with open(path, "w") as out:
-        out.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
-        for p in verts:
-            out.write(" ".join(repr(float(c)) for c in p) + "\n")
-        for t in faces:
-            out.write("3 " + " ".join(str(i) for i in t) + "\n")
-
-
-def strip_stats(doc):
-    doc = dict(doc)
-    doc.pop("stats", None)
-    return doc
+    return run_program(PROXIMA, *args)
 
 
 class Cli(unittest.TestCase):
@@ -55,9 +27,9 @@ class Cli(unittest.TestCase):
         cls.a = os.path.join(cls.tmp, "a.off")
         cls.b = os.path.join(cls.tmp, "b.off")
         cls.two = os.path.join(cls.tmp, "two.off")
-        write_off(cls.a, [box_off((0, 0, 0), (1, 1, 1))])
-        write_off(cls.b, [box_off((1.5, 0, 0), (2.5, 1, 1))])
-        write_off(cls.two, [box_off((0, 0, 0), (1, 1, 1)), box_off((0, 0, 1.25), (1, 1, 2))])
+        write_off(cls.a, [box_mesh((0, 0, 0), (1, 1, 1))])
+        write_off(cls.b, [box_mesh((1.5, 0, 0), (2.5, 1, 1))])
+        write_off(cls.two, [box_mesh((0, 0, 0), (1, 1, 1)), box_mesh((0, 0, 1.25), (1, 1, 2))])
 
     def tmpfile(self, name, text):
         path = os.path.join(self.tmp, name)
@@ -89,7 +61,7 @@ class Cli(unittest.TestCase):
     @staticmethod
     def ring_pairs():
         # Adjacent (vertex-sharing) unordered triangle pairs of the 12-triangle box.
-        _, f = box_off((0, 0, 0), (1, 1, 1))
+        _, f = box_mesh((0, 0, 0), (1, 1, 1))
         return sum(1 for i in range(12) for j in range(i + 1, 12) if set(f[i]) & set(f[j]))
 
     def test_split_components_and_file_triangle_ids(self):
@@ -122,7 +94,7 @@ class Cli(unittest.TestCase):
 
     def test_crossing_boxes_collide(self):
         c = os.path.join(self.tmp, "c.off")
-        write_off(c, [box_off((0.5, 0.5, 0.5), (1.5, 1.5, 1.5))])
+        write_off(c, [box_mesh((0.5, 0.5, 0.5), (1.5, 1.5, 1.5))])
         doc = self.distance("--collisions", self.a, c)
         self.assertGreater(len(doc["collisions"]), 0)
         for p in doc["collisions"]:
@@ -132,7 +104,7 @@ class Cli(unittest.TestCase):
     def test_penetration_of_overlapping_boxes(self):
         # b overlaps a by 0.3 along x: the local penetration vector is (-0.3, 0, 0) for a.
         c = os.path.join(self.tmp, "over.off")
-        write_off(c, [box_off((0.7, 0.2, 0.2), (1.7, 0.8, 0.8))])
+        write_off(c, [box_mesh((0.7, 0.2, 0.2), (1.7, 0.8, 0.8))])
         doc = self.distance("--penetration", self.a, c)
         self.assertGreater(len(doc["collisions"]), 0)  # --penetration implies --collisions
         self.assertEqual(len(doc["penetrations"]), 1)

@@ -19,20 +19,9 @@ import unittest
 PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 PROXIMAD = sys.argv[2] if len(sys.argv) > 2 else None
 
-
-def run(*args, timeout=120):
-    p = subprocess.run(list(args), capture_output=True, text=True, timeout=timeout)
-    # A negative return code is a signal: a crash, never acceptable.
-    assert p.returncode >= 0, f"{args[0]} crashed with signal {-p.returncode}: {p.stderr}"
-    return p
-
-
-def box(lo, hi):
-    v = [(hi[0] if k & 1 else lo[0], hi[1] if k & 2 else lo[1], hi[2] if k & 4 else lo[2])
-         for k in range(8)]
-    f = [(0, 2, 1), (1, 2, 3), (4, 5, 6), (5, 7, 6), (0, 1, 4), (1, 5, 4), (2, 6, 3), (3, 6, 7),
-         (0, 4, 2), (2, 4, 6), (1, 3, 5), (3, 7, 5)]
-    return v, f
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import Daemon, box_mesh, write_off
+from cli_helpers import run_program as run  # noqa: E402
 
 
 def grid(n, x0, y0, z, size):
@@ -46,14 +35,8 @@ def grid(n, x0, y0, z, size):
     return v, f
 
 
-def write_off(path, mesh):
-    v, f = mesh
-    with open(path, "w") as out:
-        out.write(f"OFF\n{len(v)} {len(f)} 0\n")
-        for p in v:
-            out.write(" ".join(repr(float(c)) for c in p) + "\n")
-        for t in f:
-            out.write("3 " + " ".join(str(i) for i in t) + "\n")
+def write_off_one(path, mesh):
+    write_off(path, [mesh])
 
 
 def strip_stats(doc):
@@ -78,8 +61,9 @@ class MassiveCli(unittest.TestCase):
         shift = [0.0, -1.0, 0.0, -0.95, 0.0, -1.3]
         for i in range(6):
             x = 2.0 * i + shift[i]
-            write_off(os.path.join(meshes, f"box-{i}.off"), box((x, 0, 0), (x + 1, 1, 1)))
-        write_off(os.path.join(meshes, "floor.off"), grid(40, -1, -1, 0.0, 14))
+            write_off_one(os.path.join(meshes, f"box-{i}.off"),
+                          box_mesh((x, 0, 0), (x + 1, 1, 1)))
+        write_off_one(os.path.join(meshes, "floor.off"), grid(40, -1, -1, 0.0, 14))
         cls.models = os.path.join(cls.tmp, "models")
         cls.store = os.path.join(cls.models, "row")
         p = run(PROXIMA, "import", "--store", cls.store, "--max-piece-bytes", "64K", "--quiet",
@@ -87,7 +71,7 @@ class MassiveCli(unittest.TestCase):
         assert p.returncode == 0, p.stderr
         cls.summary = json.loads(p.stdout)
         cls.avatar = os.path.join(cls.tmp, "avatar.off")
-        write_off(cls.avatar, box((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1)))
+        write_off_one(cls.avatar, box_mesh((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1)))
         cls.path = os.path.join(cls.tmp, "path.txt")
         with open(cls.path, "w") as out:
             out.write("# along the row at mid height, then one full transform\n")
@@ -181,19 +165,10 @@ class MassiveCli(unittest.TestCase):
 
     @unittest.skipUnless(PROXIMAD, "no proximad given")
     def test_server_equals_local(self):
-        proc = subprocess.Popen([PROXIMAD, "--listen", "127.0.0.1:0", "--models", self.models,
-                                 "--cache-bytes", str(256 * 1024), "--gpu", "off",
-                                 "--log-level", "warn"],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        daemon = Daemon(PROXIMAD, "--models", self.models, "--cache-bytes", str(256 * 1024),
+                        "--gpu", "off", "--log-level", "warn")
+        address = daemon.address
         try:
-            first = []
-            reader = threading.Thread(target=lambda: first.append(proc.stdout.readline()))
-            reader.daemon = True
-            reader.start()
-            reader.join(30)
-            m = re.match(r"listening on (\S+:\d+)$", first[0].strip()) if first else None
-            self.assertTrue(m, f"proximad did not start: {first!r}")
-            address = m.group(1)
             models = self.json_of("models", "--server", address, "--json")
             self.assertEqual([m["name"] for m in models["models"]], ["row"])
             self.assertEqual(models["models"][0]["pieces"], self.summary["pieces"])
@@ -216,14 +191,8 @@ class MassiveCli(unittest.TestCase):
             self.assertEqual(p.returncode, 1)
             self.assertIn("NOT_FOUND", p.stderr)
         finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            proc.stdout.close()
-            proc.stderr.close()
+            self.assertEqual(daemon.stop(), 0, daemon.log())
+            daemon.close()
 
 
 if __name__ == "__main__":

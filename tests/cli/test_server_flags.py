@@ -20,6 +20,9 @@ import unittest
 PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 PROXIMAD = sys.argv[2] if len(sys.argv) > 2 else None
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import Daemon as SharedDaemon, run_program as run  # noqa: E402
+
 BOX_OFF = """OFF
 8 12 0
 0 0 0
@@ -45,44 +48,11 @@ BOX_OFF = """OFF
 """
 
 
-def run(*args, env=None, timeout=120):
-    full_env = dict(os.environ)
-    full_env.pop("PROXIMA_TOKEN", None)
-    full_env.update(env or {})
-    p = subprocess.run(list(args), capture_output=True, text=True, timeout=timeout, env=full_env)
-    # A negative return code is a signal: a crash, never acceptable.
-    assert p.returncode >= 0, f"{args[0]} crashed with signal {-p.returncode}: {p.stderr}"
-    return p
-
-
-class Daemon:
-    """proximad on a free loopback port; `address` comes from its first stdout line."""
+class Daemon(SharedDaemon):
+    """proximad on a free loopback port, logging warnings only."""
 
     def __init__(self, *flags):
-        self.proc = subprocess.Popen([PROXIMAD, "--listen", "127.0.0.1:0", "--log-level", "warn",
-                                      *flags], stdout=subprocess.PIPE,
-                                     stderr=subprocess.DEVNULL, text=True)
-        first = []
-        reader = threading.Thread(target=lambda: first.append(self.proc.stdout.readline()))
-        reader.daemon = True
-        reader.start()
-        reader.join(30)
-        m = re.match(r"listening on (\S+:\d+)$", first[0].strip()) if first else None
-        if not m:
-            self.proc.kill()
-            self.proc.wait()
-            raise RuntimeError(f"proximad did not print 'listening on HOST:PORT' (got {first!r})")
-        self.address = m.group(1)
-        threading.Thread(target=self.proc.stdout.read, daemon=True).start()
-
-    def stop(self):
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.proc.wait(60)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-            return "hung after SIGTERM"
+        super().__init__(PROXIMAD, "--log-level", "warn", *flags)
 
 
 class ServerFlags(unittest.TestCase):

@@ -34,13 +34,10 @@ parser.add_argument("--api-doc-example", required=True,
 ARGS, UNITTEST_ARGS = parser.parse_known_args()
 CLIENT_DIR = os.path.dirname(os.path.abspath(ARGS.example))
 
-
-def box_off(lo, hi):
-    v = [(hi[0] if k & 1 else lo[0], hi[1] if k & 2 else lo[1], hi[2] if k & 4 else lo[2])
-         for k in range(8)]
-    f = [(0, 2, 1), (1, 2, 3), (4, 5, 6), (5, 7, 6), (0, 1, 4), (1, 5, 4),
-         (2, 6, 3), (3, 6, 7), (0, 4, 2), (2, 4, 6), (1, 3, 5), (3, 7, 5)]
-    return v, f
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from cli_helpers import Daemon as SharedDaemon  # noqa: E402
+from cli_helpers import box_mesh, strip_stats, write_off  # noqa: E402
+from cli_helpers import run_program as run  # noqa: E402
 
 
 def grid_off(n, z):
@@ -55,72 +52,9 @@ def grid_off(n, z):
     return v, f
 
 
-def write_off(path, parts):
-    verts, faces = [], []
-    for v, f in parts:
-        base = len(verts)
-        verts += v
-        faces += [tuple(base + i for i in t) for t in f]
-    with open(path, "w") as out:
-        out.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
-        for p in verts:
-            out.write(" ".join(repr(float(c)) for c in p) + "\n")
-        for t in faces:
-            out.write("3 " + " ".join(str(i) for i in t) + "\n")
-
-
-def run(*cmd, timeout=240):
-    p = subprocess.run(list(cmd), capture_output=True, text=True, timeout=timeout)
-    assert p.returncode >= 0, f"{cmd[0]} crashed with signal {-p.returncode}: {p.stderr}"
-    return p
-
-
-class Daemon:
-    """proximad on a free loopback port; `address` comes from its first stdout line."""
-
+class Daemon(SharedDaemon):
     def __init__(self, *flags):
-        self.stderr = tempfile.TemporaryFile(mode="w+")
-        self.proc = subprocess.Popen([ARGS.proximad, "--listen", "127.0.0.1:0", *flags],
-                                     stdout=subprocess.PIPE, stderr=self.stderr, text=True)
-        first = []
-        reader = threading.Thread(target=lambda: first.append(self.proc.stdout.readline()))
-        reader.daemon = True
-        reader.start()
-        reader.join(30)
-        m = re.match(r"listening on (\S+:\d+)$", first[0].strip()) if first else None
-        if not m:
-            self.proc.kill()
-            self.proc.wait()
-            raise RuntimeError(f"proximad did not print 'listening on HOST:PORT' (got {first!r});"
-                               f" stderr:\n{self.log()}")
-        self.address = m.group(1)
-        # Keep draining stdout so the daemon never blocks on a full pipe.
-        threading.Thread(target=self.proc.stdout.read, daemon=True).start()
-
-    def log(self):
-        self.stderr.seek(0)
-        return self.stderr.read()
-
-    def close(self):
-        self.stderr.close()
-
-    def stop(self):
-        """SIGTERM, then the exit status (killed after 60 s: a hang is a failure too)."""
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.proc.wait(60)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-            return "hung after SIGTERM"
-        finally:
-            self.proc.stdout.close()
-
-
-def strip_stats(doc):
-    doc = dict(doc)
-    doc.pop("stats", None)
-    return doc
+        super().__init__(ARGS.proximad, *flags)
 
 
 class ServerCli(unittest.TestCase):
@@ -129,17 +63,17 @@ class ServerCli(unittest.TestCase):
         cls.tmp = tempfile.mkdtemp(prefix="proxima-e2e-")
         cls.files = {}
         shapes = {
-            "a": [box_off((0, 0, 0), (1, 1, 1))],
-            "apart": [box_off((1.5, 0, 0), (2.5, 1, 1))],
-            "touching": [box_off((1, 0.25, 0.25), (1.5, 0.75, 0.75))],
-            "crossing": [box_off((0.5, 0.5, 0.5), (1.5, 1.5, 1.5))],
-            "two": [box_off((0, 0, 0), (1, 1, 1)), box_off((0, 0, 1.25), (1, 1, 2))],
+            "a": [box_mesh((0, 0, 0), (1, 1, 1))],
+            "apart": [box_mesh((1.5, 0, 0), (2.5, 1, 1))],
+            "touching": [box_mesh((1, 0.25, 0.25), (1.5, 0.75, 0.75))],
+            "crossing": [box_mesh((0.5, 0.5, 0.5), (1.5, 1.5, 1.5))],
+            "two": [box_mesh((0, 0, 0), (1, 1, 1)), box_mesh((0, 0, 1.25), (1, 1, 2))],
             # 52K vertices, 102K triangles: both buffers take two 1 MiB upload chunks.
             "grid": [grid_off(227, 1.1)],
             # Two frames of one scene: the second box sweeps through the first.
-            "sweep0": [box_off((0, 0, 0), (1, 1, 1)), box_off((2, 0.25, 0.25), (2.5, 0.75, 0.75))],
-            "sweep1": [box_off((0, 0, 0), (1, 1, 1)),
-                       box_off((-1, 0.25, 0.25), (-0.5, 0.75, 0.75))],
+            "sweep0": [box_mesh((0, 0, 0), (1, 1, 1)), box_mesh((2, 0.25, 0.25), (2.5, 0.75, 0.75))],
+            "sweep1": [box_mesh((0, 0, 0), (1, 1, 1)),
+                       box_mesh((-1, 0.25, 0.25), (-0.5, 0.75, 0.75))],
         }
         for name, parts in shapes.items():
             cls.files[name] = os.path.join(cls.tmp, name + ".off")
