@@ -64,7 +64,7 @@
 // for values that become subnormal, whose error is covered by the absolute term) together with
 // d (rounded up) and tol. The exclusion tests compare fl(max + e) < -d and fl(min - e) > d:
 // rounding to nearest is monotone and -d, d are doubles, so each holds only if it holds exactly.
-// tests/unit/test_ccd_elementary.cpp checks the bound against exact GMP evaluation.
+// tests/engine/ccd/test_ccd_elementary.cpp checks the bound against exact GMP evaluation.
 //
 // The inclusion test uses |F_k| <= d on each axis (a box around the sphere of radius d), so with
 // d > 0 contacts up to sqrt(3) d apart may be reported: conservative, never a miss.
