@@ -1,5 +1,6 @@
 #include "config.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -262,6 +263,18 @@ nlohmann::json config_json(const ServerConfig& c) {
             {"log-format", c.log_format}};
 }
 
+// CLI11 reads an unsigned option with strtoull, which takes "-3" as 2^64 - 3: a negative limit
+// would silently become (nearly) unlimited. Unsigned flags take digits only.
+const CLI::Validator WHOLE_NUMBER(
+    [](const std::string& text) -> std::string {
+        if (text.empty() ||
+            !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+            return "'" + text + "' is not a whole number (0, 1, 2, ...)";
+        }
+        return {};
+    },
+    "UINT");
+
 ConfigOutcome load_config(int argc, char** argv) {
     const ServerConfig defaults;
     ServerConfig flags;  // what the command line says; only options actually given are used
@@ -288,26 +301,31 @@ ConfigOutcome load_config(int argc, char** argv) {
             ->default_str(defaults.listen),
         [&](ServerConfig& c) { c.listen = flags.listen; });
     add(app.add_option("--max-scenes", flags.limits.max_scenes, "live scenes at most")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.limits.max_scenes)),
         [&](ServerConfig& c) { c.limits.max_scenes = flags.limits.max_scenes; });
     add(app.add_option("--max-objects-per-scene", flags.limits.max_objects_per_scene,
                        "objects in one scene at most")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.limits.max_objects_per_scene)),
         [&](ServerConfig& c) {
             c.limits.max_objects_per_scene = flags.limits.max_objects_per_scene;
         });
     add(app.add_option("--max-triangles-per-scene", flags.limits.max_triangles_per_scene,
                        "triangles in one scene at most")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.limits.max_triangles_per_scene)),
         [&](ServerConfig& c) {
             c.limits.max_triangles_per_scene = flags.limits.max_triangles_per_scene;
         });
     add(app.add_option("--max-message-bytes", flags.limits.max_message_bytes,
                        "largest message received or sent, in bytes")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.limits.max_message_bytes)),
         [&](ServerConfig& c) { c.limits.max_message_bytes = flags.limits.max_message_bytes; });
     add(app.add_option("--max-frames-in-flight", flags.limits.max_frames_in_flight,
                        "frames read but not yet answered per stream")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.limits.max_frames_in_flight)),
         [&](ServerConfig& c) {
             c.limits.max_frames_in_flight = flags.limits.max_frames_in_flight;
@@ -323,6 +341,7 @@ ConfigOutcome load_config(int argc, char** argv) {
         [&](ServerConfig& c) { c.log_level = flags.log_level; });
     add(app.add_option("--worker-threads", flags.worker_threads,
                        "threads for engine work; 0: max(4, hardware threads)")
+            ->check(WHOLE_NUMBER)
             ->default_str("0"),
         [&](ServerConfig& c) { c.worker_threads = flags.worker_threads; });
     add(app.add_option("--gpu", flags.gpu,
@@ -339,6 +358,7 @@ ConfigOutcome load_config(int argc, char** argv) {
     add(app.add_option("--cache-bytes", flags.cache_bytes,
                        "budget in bytes of the geometry cache shared by every model, "
                        "verification and review room")
+            ->check(WHOLE_NUMBER)
             ->default_str(std::to_string(defaults.cache_bytes)),
         [&](ServerConfig& c) { c.cache_bytes = flags.cache_bytes; });
 
