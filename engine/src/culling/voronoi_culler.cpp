@@ -155,7 +155,7 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
     const double scale = coordinate_scale(region);
     const double slack = rounding_slack(scale);
     // Grid coordinates must fit the packed key.
-    const double h = std::max(job.cell, scale / static_cast<double>(GRID_HALF_RANGE / 2));
+    const double h = std::max(job.cell, scale / static_cast<double>(GRID_HALF_RANGE >> 1));
     const double rho = h * std::sqrt(3.0) / 2.0 * (1.0 + 1e-12) + 4.0 * slack;
     const double R = job.radius;
     out.stats.cell = h;
@@ -385,11 +385,12 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
         }
     }
     for (std::size_t f = 0; f < nt; ++f) {
-        for (int c = 0; c < 3; ++c) {
+        for (std::size_t c = 0; c < 3; ++c) {
             for (int a = 0; a < 3; ++a) {
                 const double x = tris[f][c][a] - origin[a];
                 max_abs = std::max(max_abs, std::abs(x));
-                in.triangle_vertices[9 * f + 3 * c + a] = static_cast<float>(x);
+                in.triangle_vertices[9 * f + 3 * c + static_cast<std::size_t>(a)] =
+                    static_cast<float>(x);
             }
         }
     }

@@ -254,7 +254,7 @@ class EglDvdBackend final : public dvd::Backend {
             lose(before);
             return unavailable("GPU kernel: " + before);
         }
-        const Status s = execute(in, samples, out);
+        Status s = execute(in, samples, out);
         // The test hook ends the job exactly where a real reset would be noticed.
         const bool simulate = m_lose_after && m_jobs_done >= *m_lose_after;
         std::string reason =

@@ -192,8 +192,9 @@ StatusOr<std::vector<CcdQuery>> parse_ccd_queries(std::string_view text, const s
         CcdQuery& query = queries.back();
         static constexpr const char* AXIS = "xyz";
         for (int k = 0; k < 3; ++k) {
-            set_integer(num.z, fields[static_cast<std::size_t>(2 * k)]);
-            set_integer(den.z, fields[static_cast<std::size_t>(2 * k + 1)]);
+            const std::size_t at = 2 * static_cast<std::size_t>(k);
+            set_integer(num.z, fields[at]);
+            set_integer(den.z, fields[at + 1]);
             if (mpz_sgn(den.z) == 0) {
                 return error_at(path, line_number, std::string("zero denominator for ") + AXIS[k]);
             }

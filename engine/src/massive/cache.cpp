@@ -187,7 +187,7 @@ void GeometryCache::evict_locked() {
 }
 
 void GeometryCache::prefetch(const std::shared_ptr<const Store>& store,
-                             std::vector<std::uint32_t> pieces, std::uint64_t stream) {
+                             const std::vector<std::uint32_t>& pieces, std::uint64_t stream) {
     {
         std::lock_guard lock(m_mutex);
         std::erase_if(m_hints, [&](const Hint& h) { return h.stream == stream; });

@@ -756,6 +756,7 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
     std::sort(deck.begin(), deck.end());
     for (int l = 0; l < levels; ++l) {
         std::vector<double> s;
+        s.reserve(columns.size() + std::max(deck.size(), secondary.size()));
         for (double x : columns) {
             s.push_back(x0 + x);
         }
@@ -979,7 +980,9 @@ StatusOr<GeneratedSummary> generate_plant(const PlantOptions& options, const Obj
     std::vector<std::vector<ObjectPlan>> plan;
     plan.reserve(bays);
     for (std::uint32_t b = 0; b < bays; ++b) {
-        plan.push_back(plan_bay(options.seed, b, CELL_X * (b % columns), CELL_Y * (b / columns)));
+        const std::uint32_t column = b % columns;
+        const std::uint32_t row = b / columns;
+        plan.push_back(plan_bay(options.seed, b, CELL_X * column, CELL_Y * row));
     }
 
     // The density whose exact triangle count is closest to the target (the count is a
@@ -1174,9 +1177,10 @@ Status load_model(const std::filesystem::path& root, const std::filesystem::path
         Affine a;
         for (int i = 0; i < 3; ++i) {
             for (int j = 0; j < 3; ++j) {
-                a.m[static_cast<std::size_t>(4 * i + j)] = m[i][j] == 0 ? 0.0 : m[i][j] * scale;
+                a.m[4 * static_cast<std::size_t>(i) + static_cast<std::size_t>(j)] =
+                    m[i][j] == 0 ? 0.0 : m[i][j] * scale;
             }
-            a.m[static_cast<std::size_t>(4 * i + 3)] = 0.0;
+            a.m[4 * static_cast<std::size_t>(i) + 3] = 0.0;
         }
         model.linear[static_cast<std::size_t>(q)] = a;
         Aabb box;

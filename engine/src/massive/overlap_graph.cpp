@@ -115,8 +115,9 @@ std::vector<Edge> overlap_edges(const std::vector<GraphNode>& nodes, double tole
             // Strips about twice a typical box wide: most boxes lie in one or two of them.
             const double w = 2.0 * (*mid + r_sweep);
             const double count = w > 0.0 ? std::floor((high - low) / w) : 1.0;
+            const std::size_t most = n / 16 + 1;
             const auto s = static_cast<std::size_t>(
-                std::clamp(count, 1.0, std::min(4096.0, static_cast<double>(n / 16 + 1))));
+                std::clamp(count, 1.0, std::min(4096.0, static_cast<double>(most))));
             if (s > strips) {
                 strips = s;
                 strip_axis = k;
@@ -140,8 +141,9 @@ std::vector<Edge> overlap_edges(const std::vector<GraphNode>& nodes, double tole
         if (listed <= 8 * static_cast<std::uint64_t>(n)) {
             break;
         }
-        width *= static_cast<double>(strips) / static_cast<double>(strips / 2);
-        strips /= 2;
+        const std::size_t half = strips / 2;
+        width *= static_cast<double>(strips) / static_cast<double>(half);
+        strips = half;
     }
 
     // Boxes in sweep order, one array per coordinate (upper bounds grown by r_sweep, the very

@@ -332,7 +332,7 @@ struct StoreWriter::Impl {
 };
 
 StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::create(const std::string& dir,
-                                                           StoreOptions options) {
+                                                           const StoreOptions& options) {
     const std::string what = "store '" + dir + "'";
     if (options.chunk_bytes < MIN_CHUNK_BYTES || options.chunk_bytes > MAX_CHUNK_BYTES) {
         return invalid_argument(what + ": chunk size " + std::to_string(options.chunk_bytes) +
@@ -413,7 +413,7 @@ StoreWriter::~StoreWriter() {
     }
 }
 
-Status StoreWriter::add(ModelObject object) {
+Status StoreWriter::add(const ModelObject& object) {
     Impl& w = *m_impl;
     if (!w.failed.ok()) {
         return failed_precondition(

@@ -18,13 +18,13 @@ std::string generation_name(std::uint64_t number) {
 }
 
 std::optional<std::uint64_t> parse_generation(std::string_view name) {
-    constexpr std::string_view prefix = "gen-";
-    if (name.size() < prefix.size() + 6 || name.size() > prefix.size() + 18 ||
-        name.substr(0, prefix.size()) != prefix) {
+    constexpr std::string_view PREFIX = "gen-";
+    if (name.size() < PREFIX.size() + 6 || name.size() > PREFIX.size() + 18 ||
+        name.substr(0, PREFIX.size()) != PREFIX) {
         return std::nullopt;
     }
     std::uint64_t n = 0;
-    for (char c : name.substr(prefix.size())) {
+    for (char c : name.substr(PREFIX.size())) {
         if (c < '0' || c > '9') {
             return std::nullopt;
         }

@@ -186,12 +186,12 @@ std::vector<std::uint32_t> components(const MeshTopology& topo,
     for (std::uint32_t i = 0; i < list.size(); ++i) {
         index[list[i]] = i;
     }
-    constexpr auto none = ~std::uint32_t{0};
-    std::vector<std::uint32_t> comp(list.size(), none);
+    constexpr auto NONE = ~std::uint32_t{0};
+    std::vector<std::uint32_t> comp(list.size(), NONE);
     count = 0;
     std::vector<std::uint32_t> stack;
     for (std::uint32_t i = 0; i < list.size(); ++i) {
-        if (comp[i] != none) {
+        if (comp[i] != NONE) {
             continue;
         }
         comp[i] = count;
@@ -201,7 +201,7 @@ std::vector<std::uint32_t> components(const MeshTopology& topo,
             stack.pop_back();
             for (const auto w : topo.one_ring(list[j])) {
                 const auto it = index.find(w);
-                if (it != index.end() && comp[it->second] == none) {
+                if (it != index.end() && comp[it->second] == NONE) {
                     comp[it->second] = count;
                     stack.push_back(it->second);
                 }

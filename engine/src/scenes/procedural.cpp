@@ -424,7 +424,7 @@ struct Sequence {
 };
 
 ProceduralScene make_scene(std::string name, std::string description, std::size_t frames,
-                           std::shared_ptr<Sequence> seq) {
+                           const std::shared_ptr<Sequence>& seq) {
     seq->finish();
     ProceduralScene scene;
     scene.name = std::move(name);
@@ -488,7 +488,7 @@ constexpr int SKIRT_ROWS = 57;
 void place_skirt(std::size_t k, std::vector<Vec3>& out) {
     const double t = frame_time(k);
     out.resize(static_cast<std::size_t>(SKIRT_AROUND) * SKIRT_ROWS);
-    constexpr int pleats = 12;
+    constexpr int PLEATS = 12;
     const double fold = 0.75 + 0.25 * std::sin(2.1 * t);
     const double sway_x = 0.07 * std::sin(2.3 * t + 0.3);
     const double sway_z = 0.05 * std::sin(1.9 * t + 1.1);
@@ -500,8 +500,8 @@ void place_skirt(std::size_t k, std::vector<Vec3>& out) {
         const double strength = (0.3 + 0.7 * s) * fold;
         for (int i = 0; i < SKIRT_AROUND; ++i) {
             const double theta = 2.0 * PI * i / SKIRT_AROUND;
-            const auto [bulge, remapped] = pleat(pleats * theta, strength);
-            const double angle = remapped / pleats + twist * s * s;
+            const auto [bulge, remapped] = pleat(PLEATS * theta, strength);
+            const double angle = remapped / PLEATS + twist * s * s;
             const double r = radius * (1.0 + depth * bulge);
             const double hem_lift = 0.05 * s * s * (1.0 - std::cos(angle - 2.3 * t));
             out[static_cast<std::size_t>(j) * SKIRT_AROUND + i] = {
@@ -603,17 +603,17 @@ void place_cloth(std::size_t k, std::vector<Vec3>& out) {
 constexpr double BOWL_INNER = 0.6;  // inner sphere radius; the sphere's centre is at y = 0.6
 
 TriangleMesh bowl_mesh() {
-    constexpr int segments = 8;  // per wall, bottom to rim
-    constexpr double rim = 1.4;  // polar angle of the rim from the bottom (radians)
-    constexpr double outer = BOWL_INNER + 0.03;
+    constexpr int SEGMENTS = 8;  // per wall, bottom to rim
+    constexpr double RIM = 1.4;  // polar angle of the rim from the bottom (radians)
+    constexpr double OUTER = BOWL_INNER + 0.03;
     std::vector<std::pair<double, double>> profile;
-    for (int i = 0; i <= segments; ++i) {
-        const double a = rim * i / segments;
+    for (int i = 0; i <= SEGMENTS; ++i) {
+        const double a = RIM * i / SEGMENTS;
         profile.emplace_back(BOWL_INNER * std::sin(a), BOWL_INNER - BOWL_INNER * std::cos(a));
     }
-    for (int i = segments; i >= 0; --i) {
-        const double a = rim * i / segments;
-        profile.emplace_back(outer * std::sin(a), BOWL_INNER - outer * std::cos(a));
+    for (int i = SEGMENTS; i >= 0; --i) {
+        const double a = RIM * i / SEGMENTS;
+        profile.emplace_back(OUTER * std::sin(a), BOWL_INNER - OUTER * std::cos(a));
     }
     return revolution(profile, 50);
 }
@@ -785,7 +785,7 @@ ProceduralScene bowl(std::size_t frames) {
         [](std::size_t, const std::vector<Vec3>& rest, std::vector<Vec3>& out) { out = rest; },
         false));
     Rng rng(0xB0E1);
-    constexpr double radius = 0.1;
+    constexpr double RADIUS = 0.1;
     for (int i = 0; i < 10; ++i) {
         // Resting place on the inner wall: one at the bottom, a ring of six, a ring of three.
         double alpha = 0.0;
@@ -799,7 +799,7 @@ ProceduralScene bowl(std::size_t frames) {
         }
         // The centre stays this far inside the bowl's inner sphere: the radius plus what the
         // impact squash and the ripple add to it.
-        const double reach = BOWL_INNER - 1.17 * radius;
+        const double reach = BOWL_INNER - 1.17 * RADIUS;
         const Vec3 rest{reach * std::sin(alpha) * std::cos(beta),
                         BOWL_INNER - reach * std::cos(alpha),
                         reach * std::sin(alpha) * std::sin(beta)};
@@ -807,15 +807,15 @@ ProceduralScene bowl(std::size_t frames) {
         const Vec3 axis = rng.unit_vector();
         const double turn = rng.uniform(1.0, 3.0);
         const double phase = rng.uniform(0.0, 2.0 * PI);
-        auto mesh = small_object(i, radius, 16, 10);
+        auto mesh = small_object(i, RADIUS, 16, 10);
         auto map = [=](std::size_t k, const std::vector<Vec3>& local, std::vector<Vec3>& out) {
             const double t = frame_time(k);
-            constexpr double g = 9.81;
-            const double t_hit = std::sqrt(2.0 * height / g);
+            constexpr double G = 9.81;
+            const double t_hit = std::sqrt(2.0 * height / G);
             double y = 0.0;
             double squash = 1.0;
             if (t < t_hit) {
-                y = height - 0.5 * g * t * t;
+                y = height - 0.5 * G * t * t;
             } else {
                 const double dt = t - t_hit;
                 y = 0.06 * std::exp(-3.0 * dt) * std::abs(std::sin(9.0 * dt));
@@ -827,7 +827,7 @@ ProceduralScene bowl(std::size_t frames) {
             const Mat3 spin = rotation(axis, turn * (1.0 - std::exp(-2.0 * t)));
             out.resize(local.size());
             for (std::size_t v = 0; v < local.size(); ++v) {
-                out[v] = centre + spin * wobble(local[v], squash, 0.04, 6.0 * t + phase, radius);
+                out[v] = centre + spin * wobble(local[v], squash, 0.04, 6.0 * t + phase, RADIUS);
             }
         };
         seq->phases[0].push_back(shaped_part("object" + std::to_string(i), std::move(mesh), map));
@@ -843,14 +843,15 @@ ProceduralScene ramps(std::size_t frames) {
         seq->phases[0].push_back(ramp_slab(j));
     }
     auto path = std::make_shared<const RampPath>(ramp_path());
-    constexpr int objects = 200;
-    constexpr int lanes = 4;
-    constexpr double speed = 0.9;
+    constexpr int OBJECTS = 200;
+    constexpr int LANES = 4;
+    constexpr double SPEED = 0.9;
     Rng rng(0x5A3B);
-    for (int i = 0; i < objects; ++i) {
-        const int lane = i % lanes;
-        const int slot = i / lanes;
-        const double spacing = path->length / (objects / lanes);
+    for (int i = 0; i < OBJECTS; ++i) {
+        const int lane = i % LANES;
+        const int slot = i / LANES;
+        constexpr int PER_LANE = OBJECTS / LANES;
+        const double spacing = path->length / PER_LANE;
         const double start = (slot + 0.25 * lane + rng.uniform(-0.1, 0.1)) * spacing;
         const double z = (lane - 1.5) * 0.155 + rng.uniform(-0.005, 0.005);
         const double radius = rng.uniform(0.05, RAMP_OBJECT_MAX);
@@ -864,7 +865,7 @@ ProceduralScene ramps(std::size_t frames) {
         auto map = [=](std::size_t k, const std::vector<Vec3>& local, std::vector<Vec3>& out) {
             const double t = frame_time(k);
             // Speed surges make neighbours in a lane close in and separate again.
-            const double s = start + speed * t + 0.03 * surge * std::sin(2.0 * t + phase);
+            const double s = start + SPEED * t + 0.03 * surge * std::sin(2.0 * t + phase);
             Vec3 centre = path->at(s);
             // Centre-line is for the largest radius: smaller objects float slightly above.
             centre.z = z + 0.012 * std::sin(1.7 * t + 2.0 * phase);
@@ -916,6 +917,7 @@ ProceduralScene breaking(std::size_t frames) {
 
         // Cut longitudes, jittered so no two balls break alike.
         std::vector<double> cuts;
+        cuts.reserve(BREAK_PIECES + 1);
         const double offset = rng.uniform(0.0, 2.0 * PI);
         for (int q = 0; q < BREAK_PIECES; ++q) {
             cuts.push_back(offset + 2.0 * PI * (q + rng.uniform(-0.2, 0.2)) / BREAK_PIECES);

@@ -39,7 +39,9 @@ class FunctionRef<R(Args...)> {
   public:
     template <class F>
     requires(!std::is_same_v<std::remove_cvref_t<F>, FunctionRef>)
-        FunctionRef(F&& f)  // NOLINT(google-explicit-constructor)
+        // Not a copy or move constructor in disguise: the constraint above excludes FunctionRef.
+        // NOLINTNEXTLINE(google-explicit-constructor,bugprone-forwarding-reference-overload)
+        FunctionRef(F&& f)
         : m_object(const_cast<void*>(static_cast<const void*>(&f))),
           m_call([](void* o, Args... args) -> R {
               return (*static_cast<std::remove_reference_t<F>*>(o))(std::forward<Args>(args)...);

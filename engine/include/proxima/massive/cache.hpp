@@ -69,8 +69,8 @@ class GeometryCache {
     StatusOr<PieceHandle> get(const std::shared_ptr<const Store>& store, std::uint32_t piece);
     // Hints: the prefetch thread loads these (in order) unless resident; a newer hint list from
     // the same `stream` replaces the older one's remaining entries.
-    void prefetch(const std::shared_ptr<const Store>& store, std::vector<std::uint32_t> pieces,
-                  std::uint64_t stream = 0);
+    void prefetch(const std::shared_ptr<const Store>& store,
+                  const std::vector<std::uint32_t>& pieces, std::uint64_t stream = 0);
     bool resident(const Store& store, std::uint32_t piece) const;
 
     CacheStats stats() const;

@@ -79,12 +79,12 @@ struct StoreSummary {
 class StoreWriter {
   public:
     static StatusOr<std::unique_ptr<StoreWriter>> create(const std::string& dir,
-                                                         StoreOptions options = {});
+                                                         const StoreOptions& options = {});
     ~StoreWriter();  // without commit(): removes the partial generation
     StoreWriter(const StoreWriter&) = delete;
     StoreWriter& operator=(const StoreWriter&) = delete;
 
-    Status add(ModelObject object);
+    Status add(const ModelObject& object);
     // Writes the manifest, fsyncs, switches CURRENT, removes older generations.
     StatusOr<StoreSummary> commit(const ProgressFn& progress = {});
 
