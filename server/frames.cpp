@@ -6,8 +6,8 @@
 #include <unordered_set>
 #include <utility>
 
-#include "convert.hpp"
 #include "proxima/mesh/mesh.hpp"
+#include "proxima/wire/frames.hpp"
 
 namespace proxima::server {
 
@@ -164,7 +164,7 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
                  const CancelToken* cancel, v1::FrameResult* out,
                  const std::function<Status()>& after_apply) {
     const auto start = std::chrono::steady_clock::now();
-    auto decoded = decode_frame(frame);
+    auto decoded = wire::decode_frame(frame);
     if (!decoded.ok()) {
         return decoded.status();
     }
@@ -222,14 +222,14 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     }
     out->set_scene_id(entry.id);
     out->set_frame(frame.frame());
-    encode_frame_result(scene, changes.value(), result.value(), decoded->self_points, out);
+    wire::encode_frame_result(scene, changes.value(), result.value(), decoded->self_points, out);
     if (decoded->penetration) {
         auto penetrations = penetration_depths(scene, result->collisions, cancel);
         if (!penetrations.ok()) {
             return penetrations.status();
         }
         for (const auto& p : penetrations.value()) {
-            encode_penetration(p, out->add_penetrations());
+            wire::encode_penetration(p, out->add_penetrations());
         }
     }
     if (before) {
@@ -242,7 +242,7 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
         if (!ccd.ok()) {
             return ccd.status();
         }
-        encode_ccd_result(ccd.value(), out->mutable_ccd());
+        wire::encode_ccd_result(ccd.value(), out->mutable_ccd());
     }
     // gRPC would refuse to send it anyway; saying why here gives the client something to act on.
     if (const auto bytes = out->ByteSizeLong(); bytes > limits.max_message_bytes) {

@@ -1,6 +1,6 @@
 // The massive-model RPCs of ProximityService: ListModels, VerifyModel and Review (seed 001,
 // IMMPACT §4.4–§6.5). Models and the shared geometry cache are in models.hpp, rooms and their
-// fan-out in rooms.hpp, every proto conversion in convert.cpp.
+// fan-out in rooms.hpp, every proto conversion in proto/wire (massive.hpp).
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -15,10 +15,13 @@
 
 #include <spdlog/spdlog.h>
 
-#include "convert.hpp"
+#include "encode.hpp"
 #include "proxima/massive/avatar.hpp"
 #include "proxima/massive/verify.hpp"
 #include "proxima/mesh/mesh.hpp"
+#include "proxima/wire/buffers.hpp"
+#include "proxima/wire/massive.hpp"
+#include "proxima/wire/status.hpp"
 #include "service.hpp"
 #include "service_internal.hpp"
 
@@ -117,7 +120,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
 
     void run() {
         Status s = guarded([&]() -> Status {
-            if (Status t = check_tolerance(m_tolerance, "tolerance"); !t.ok()) {
+            if (Status t = wire::check_tolerance(m_tolerance, "tolerance"); !t.ok()) {
                 return t;
             }
             auto model = find_model(m_shared, *m_admission.principal(), m_model_name);
@@ -138,7 +141,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
             options.tolerance = m_tolerance;
             auto on_pair = [&](const massive::ObjectPairResult& pair) {
                 v1::VerifyModelEvent event;
-                encode_object_pair(pair, *store, event.mutable_pair());
+                wire::encode_object_pair(pair, *store, event.mutable_pair());
                 std::unique_lock lock(m_mu);
                 while (m_pairs.size() >= VERIFY_MAX_PENDING_PAIRS && !stopped_locked() &&
                        !m_cancel.should_stop()) {
@@ -154,7 +157,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
             };
             auto on_progress = [&](const massive::Progress& p) {
                 std::lock_guard lock(m_mu);
-                encode_progress(p, m_progress.mutable_progress());
+                wire::encode_progress(p, m_progress.mutable_progress());
                 m_progress_dirty = true;
                 write_next_locked();
             };
@@ -166,9 +169,9 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
             std::lock_guard lock(m_mu);
             m_pairs_found = stats->pairs_found;
             m_edges = stats->edges;
-            encode_verify_stats(stats.value(),
-                                std::chrono::duration<double>(Clock::now() - m_start).count(),
-                                m_summary.mutable_summary());
+            wire::encode_verify_stats(stats.value(),
+                                      std::chrono::duration<double>(Clock::now() - m_start).count(),
+                                      m_summary.mutable_summary());
             return {};
         });
         std::lock_guard lock(m_mu);
@@ -212,7 +215,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
         } else {
             m_final = m_status;
         }
-        Finish(to_grpc_status(m_final));
+        Finish(wire::to_grpc(m_final));
     }
 
     ProximityService::Shared& m_shared;
@@ -391,7 +394,7 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
             return false;
         }
         m_out.Clear();
-        encode_room_event(item->event, &m_out);
+        wire::encode_room_event(item->event, &m_out);
         m_out_own = item->own;
         m_writing = true;
         StartWrite(&m_out);
@@ -440,7 +443,7 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
         }
         m_finished = true;
         m_final = final;
-        Finish(to_grpc_status(final));
+        Finish(wire::to_grpc(final));
     }
 
     // Worker task: the member's requests in order, until none is left or the stream stops.
@@ -493,7 +496,7 @@ class ReviewReactor final : public grpc::ServerBidiReactor<v1::ReviewRequest, v1
     }
 
     Status handle(const v1::ReviewRequest& request) {
-        auto decoded = decode_review_request(request);
+        auto decoded = wire::decode_review_request(request);
         if (!decoded.ok()) {
             return decoded.status();
         }
@@ -687,7 +690,8 @@ grpc::ServerUnaryReactor* ProximityService::ListModels(grpc::CallbackServerConte
                                }
                            }
                            response->set_cache_budget_bytes(models.cache()->budget());
-                           encode_cache_stats(models.cache()->stats(), response->mutable_cache());
+                           wire::encode_cache_stats(models.cache()->stats(),
+                                                    response->mutable_cache());
                            response->set_models_dir(models.dir());
                            extra = " models=" + std::to_string(response->models_size()) +
                                    " unavailable=" + std::to_string(response->unavailable_size());

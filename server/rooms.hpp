@@ -32,80 +32,28 @@
 
 #include "models.hpp"
 #include "proxima/massive/avatar.hpp"
+#include "proxima/massive/review.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
 
 namespace proxima::server {
 
-// What other members see of a pose's result.
-struct PoseSummary {
-    std::uint32_t collisions = 0;
-    std::uint32_t within = 0;
-    bool has_nearest = false;
-    std::uint32_t nearest_object = 0;
-    std::string nearest_name;
-    double nearest_distance = 0.0;
-};
-
-struct MemberPose {
-    bool has_pose = false;
-    std::uint64_t sequence = 0;
-    massive::Affine transform;
-    PoseSummary summary;
-    std::uint64_t model_version = 0;
-};
-
-// A member's own pose result, with the names of the objects it reports (the room's names: an
-// added object's name is the one it was added with).
-struct PoseResult {
-    std::uint64_t sequence = 0;
-    massive::AvatarResult result;
-    std::vector<std::string> collision_names;
-    std::vector<std::string> within_names;
-    std::string nearest_name;
-    std::uint64_t model_version = 0;
-    double server_seconds = 0.0;
-};
-
-enum class EditKind { move, add, remove };
-
+// The review types live in the engine (proxima/massive/review.hpp), shared with proto/wire and
+// the client.
+using massive::EditEvent;
+using massive::EditKind;
+using massive::JoinedEvent;
+using massive::MemberJoinedEvent;
+using massive::MemberLeftEvent;
+using massive::MemberPose;
+using massive::PeerEvent;
+using massive::PoseResult;
+using massive::PoseSummary;
+using massive::ReviewJoinRequest;
+using massive::ReviewPoseRequest;
+using massive::RoomEvent;
 // A decoded edit request.
-struct RoomEdit {
-    std::uint64_t sequence = 0;
-    EditKind what = EditKind::move;
-    std::uint32_t object = 0;   // move, remove
-    massive::Affine transform;  // move
-    NamedMesh added;            // add
-};
-
-struct JoinedEvent {
-    std::string room;
-    std::string model;
-    std::string generation;
-    std::vector<std::pair<std::string, MemberPose>> members;  // join order, the new one last
-    std::uint64_t model_version = 0;
-    std::uint32_t object_count = 0;
-};
-struct PeerEvent {
-    std::string member;
-    MemberPose pose;
-};
-struct EditEvent {
-    std::string member;
-    std::uint64_t sequence = 0;
-    EditKind what = EditKind::move;
-    std::uint32_t object = 0;
-    std::string object_name;
-    std::uint64_t model_version = 0;
-};
-struct MemberJoinedEvent {
-    std::string member;
-};
-struct MemberLeftEvent {
-    std::string member;
-};
-using RoomEvent =
-    std::variant<JoinedEvent, PoseResult, PeerEvent, EditEvent, MemberJoinedEvent, MemberLeftEvent>;
+using RoomEdit = massive::ReviewEditRequest;
 
 // One member's pending events, in the order they happened. Not thread-safe: guarded by
 // RoomMember::mu.

@@ -15,10 +15,12 @@
 
 #include <spdlog/spdlog.h>
 
-#include "convert.hpp"
+#include "encode.hpp"
 #include "frames.hpp"
 #include "proxima/gpu/egl_backend.hpp"
 #include "proxima/gpu/failover_backend.hpp"
+#include "proxima/wire/buffers.hpp"
+#include "proxima/wire/status.hpp"
 #include "scene_registry.hpp"
 #include "service_internal.hpp"
 #include "worker_pool.hpp"
@@ -111,7 +113,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
         if (!entry) {
             return unknown_scene(m_scene_id);
         }
-        const std::size_t stride = vertex_stride(header.type());
+        const std::size_t stride = wire::vertex_stride(header.type());
         if (stride == 0) {
             return invalid_argument(label() +
                                     ": header.type must be SCALAR_TYPE_FLOAT32 or "
@@ -195,11 +197,11 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
     }
 
     Status add() {
-        auto vertices = decode_vertex_bytes(m_header.type(), m_vertex_bytes, label());
+        auto vertices = wire::decode_vertex_bytes(m_header.type(), m_vertex_bytes, label());
         if (!vertices.ok()) {
             return vertices.status();
         }
-        auto triangles = decode_indices(m_index_bytes, label());
+        auto triangles = wire::decode_indices(m_index_bytes, label());
         if (!triangles.ok()) {
             return triangles.status();
         }
@@ -236,7 +238,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadChunk> {
         log_call(m_shared, "UploadObject", m_admission.who(), m_peer, scene_subject(m_scene_id),
                  m_start, status,
                  " bytes=" + std::to_string(m_vertex_bytes.size() + m_index_bytes.size()));
-        Finish(to_grpc_status(status));
+        Finish(wire::to_grpc(status));
     }
 
     ProximityService::Shared& m_shared;
@@ -416,7 +418,7 @@ class FrameStreamReactor final : public grpc::ServerBidiReactor<v1::Frame, v1::F
         }
         m_finished = true;
         m_final = final;
-        Finish(to_grpc_status(final));
+        Finish(wire::to_grpc(final));
     }
 
     // Worker task: processes queued frames in order until none is left or the stream stops.
@@ -794,7 +796,7 @@ grpc::ServerUnaryReactor* ProximityService::CreateScene(grpc::CallbackServerCont
             if (Status full = shared.scenes.check_capacity(); !full.ok()) {
                 return full;
             }
-            auto meshes = decode_meshes(request->objects(), "objects");
+            auto meshes = wire::decode_meshes(request->objects(), "objects");
             if (!meshes.ok()) {
                 return meshes.status();
             }

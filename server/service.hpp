@@ -1,7 +1,7 @@
 #pragma once
 // The proxima.v1.Proximity service on gRPC's callback API. Each method is a thin adapter: decode
-// (convert.hpp), call the engine through frames.hpp with the scene's mutex held, encode, map the
-// status once (to_grpc_status). Engine work runs on a WorkerPool, never on gRPC's callback
+// (proto/wire), call the engine through frames.hpp with the scene's mutex held, encode, map the
+// status once (wire::to_grpc). Engine work runs on a WorkerPool, never on gRPC's callback
 // threads; a call's deadline and cancellation reach the engine as a proxima::CancelToken.
 
 #include <chrono>

@@ -20,12 +20,13 @@
 
 #include "auth.hpp"
 #include "config.hpp"
-#include "convert.hpp"
+#include "encode.hpp"
 #include "metrics.hpp"
 #include "models.hpp"
 #include "proxima/culling/dvd.hpp"
 #include "proxima/gpu/failover_backend.hpp"
 #include "proxima/query/query.hpp"
+#include "proxima/wire/status.hpp"
 #include "rooms.hpp"
 #include "scene_registry.hpp"
 #include "service.hpp"
@@ -303,7 +304,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
         }
         log_call(m_shared, m_method, m_principal ? m_principal->log_name() : "-", m_peer,
                  scene_subject(m_scene), m_start, status, extra);
-        Finish(to_grpc_status(status));
+        Finish(wire::to_grpc(status));
     }
 
     void OnCancel() override { m_cancel.cancel(); }

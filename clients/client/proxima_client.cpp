@@ -20,13 +20,17 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include "client/convert.hpp"
+#include "client/decode.hpp"
 #include "proxima/v1/proxima.grpc.pb.h"
+#include "proxima/wire/buffers.hpp"
+#include "proxima/wire/frames.hpp"
+#include "proxima/wire/massive.hpp"
+#include "proxima/wire/status.hpp"
 
 namespace proxima::client {
 
 namespace pb = ::proxima::v1;
-using detail::from_grpc;
+using wire::from_grpc;
 
 namespace {
 
@@ -511,12 +515,12 @@ StatusOr<RemoteScene> Client::create_scene(const std::string& name,
     std::size_t inline_count = 0;
     std::size_t used = 0;
     for (; inline_count < objects.size(); ++inline_count) {
-        const auto bytes = detail::encoded_mesh_bytes(objects[inline_count], float32);
+        const auto bytes = wire::encoded_mesh_bytes(objects[inline_count], float32);
         if (used + bytes > budget) {
             break;
         }
         used += bytes;
-        detail::encode_mesh(objects[inline_count], float32, request.add_objects());
+        wire::encode_mesh(objects[inline_count], float32, request.add_objects());
     }
     // Not idempotent: a repeat after a lost answer would leave a second scene behind.
     pb::SceneInfo info;
@@ -617,24 +621,23 @@ Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedM
     auto* header = chunk.mutable_header();
     header->set_scene_id(scene_id);
     header->set_name(mesh.name);
-    header->set_type(detail::scalar_type(float32));
+    header->set_type(wire::scalar_type(float32));
     header->set_vertex_count(static_cast<std::uint32_t>(vertices.size()));
     header->set_triangle_count(static_cast<std::uint32_t>(triangles.size()));
     write(chunk);
 
-    const std::size_t stride =
-        float32 ? detail::FLOAT32_VERTEX_BYTES : detail::FLOAT64_VERTEX_BYTES;
+    const std::size_t stride = float32 ? wire::FLOAT32_VERTEX_BYTES : wire::FLOAT64_VERTEX_BYTES;
     const std::size_t vertices_per_chunk = UPLOAD_CHUNK_BYTES / stride;
     for (std::size_t first = 0; open && first < vertices.size(); first += vertices_per_chunk) {
         const auto count = std::min(vertices_per_chunk, vertices.size() - first);
         chunk.set_vertex_bytes(
-            detail::pack_vertices(std::span<const Vec3>(vertices).subspan(first, count), float32));
+            wire::pack_vertices(std::span<const Vec3>(vertices).subspan(first, count), float32));
         write(chunk);
     }
-    const std::size_t triangles_per_chunk = UPLOAD_CHUNK_BYTES / detail::TRIANGLE_BYTES;
+    const std::size_t triangles_per_chunk = UPLOAD_CHUNK_BYTES / wire::TRIANGLE_BYTES;
     for (std::size_t first = 0; open && first < triangles.size(); first += triangles_per_chunk) {
         const auto count = std::min(triangles_per_chunk, triangles.size() - first);
-        chunk.set_index_bytes(detail::pack_triangles(
+        chunk.set_index_bytes(wire::pack_triangles(
             std::span<const TriangleIndices>(triangles).subspan(first, count)));
         write(chunk);
     }
@@ -648,7 +651,7 @@ Status upload_once(Client::Impl* impl, const std::string& scene_id, const NamedM
 
 StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRequest& frame) {
     pb::Frame request;
-    detail::encode_frame(frame, scene_id, m_impl->options.float32_vertices, &request);
+    wire::encode_frame(frame, scene_id, m_impl->options.float32_vertices, &request);
     // Positions are absolute, so a frame that only moves vertices and asks questions leaves the
     // same scene when applied twice. Additions, removals and topology changes would not, and a
     // CCD frame interpolates from the positions before it, which a lost first attempt moved.
@@ -663,7 +666,7 @@ StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRe
         !st.ok()) {
         return st;
     }
-    return detail::decode_result(result);
+    return detail::decode_frame_response(result);
 }
 
 StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& scene_id) {
@@ -712,7 +715,7 @@ Status FrameStream::send(const FrameRequest& frame) {
         return {StatusCode::failed_precondition, "send() after finish()"};
     }
     pb::Frame message;
-    detail::encode_frame(frame, s.scene_id, s.float32, &message);
+    wire::encode_frame(frame, s.scene_id, s.float32, &message);
     if (!s.stream->Write(message)) {
         // The server ended the stream (a rejected frame, shutdown, cancellation): its status is
         // the useful answer, not "write failed".
@@ -746,7 +749,7 @@ StatusOr<FrameResponse> FrameStream::receive() {
     if (s.in_flight > 0) {
         --s.in_flight;
     }
-    return detail::decode_result(result);
+    return detail::decode_frame_response(result);
 }
 
 Status FrameStream::finish() {
@@ -813,7 +816,7 @@ StatusOr<RemoteVerifySummary> Client::verify_model(
                 switch (event.event_case()) {
                     case pb::VerifyModelEvent::kProgress:
                         out.kind = VerifyEvent::Kind::progress;
-                        out.progress = detail::decode_progress(event.progress());
+                        out.progress = wire::decode_progress(event.progress());
                         break;
                     case pb::VerifyModelEvent::kPair:
                         out.kind = VerifyEvent::Kind::pair;
@@ -939,7 +942,7 @@ StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& j
         return Status(StatusCode::internal, "could not start a review stream");
     }
     pb::ReviewRequest request;
-    detail::encode_review_join(join, impl->float32, &request);
+    wire::encode_review_join(join, impl->float32, &request);
     auto* raw = impl.get();
     impl->reader = std::thread([raw] { raw->read_loop(); });
     auto session = std::make_unique<ReviewSession>(std::move(impl));
@@ -980,34 +983,39 @@ const ReviewJoined& ReviewSession::joined() const {
 
 Status ReviewSession::send_pose(std::uint64_t sequence, const massive::Affine& pose) {
     pb::ReviewRequest request;
-    request.mutable_pose()->set_sequence(sequence);
-    detail::encode_transform(pose, request.mutable_pose()->mutable_transform());
+    wire::encode_review_pose({sequence, pose}, &request);
     return m_impl->write(request);
 }
 
 Status ReviewSession::move_object(std::uint64_t sequence, std::uint32_t object,
                                   const massive::Affine& transform) {
+    massive::ReviewEditRequest edit;
+    edit.sequence = sequence;
+    edit.what = massive::EditKind::move;
+    edit.object = object;
+    edit.transform = transform;
     pb::ReviewRequest request;
-    auto* edit = request.mutable_edit();
-    edit->set_sequence(sequence);
-    edit->mutable_move()->set_object(object);
-    detail::encode_transform(transform, edit->mutable_move()->mutable_transform());
+    wire::encode_review_edit(edit, m_impl->float32, &request);
     return m_impl->write(request);
 }
 
 Status ReviewSession::add_object(std::uint64_t sequence, const NamedMesh& object) {
+    massive::ReviewEditRequest edit;
+    edit.sequence = sequence;
+    edit.what = massive::EditKind::add;
+    edit.added = object;
     pb::ReviewRequest request;
-    auto* edit = request.mutable_edit();
-    edit->set_sequence(sequence);
-    detail::encode_mesh(object, m_impl->float32, edit->mutable_add());
+    wire::encode_review_edit(edit, m_impl->float32, &request);
     return m_impl->write(request);
 }
 
 Status ReviewSession::delete_object(std::uint64_t sequence, std::uint32_t object) {
+    massive::ReviewEditRequest edit;
+    edit.sequence = sequence;
+    edit.what = massive::EditKind::remove;
+    edit.object = object;
     pb::ReviewRequest request;
-    auto* edit = request.mutable_edit();
-    edit->set_sequence(sequence);
-    edit->mutable_remove()->set_object(object);
+    wire::encode_review_edit(edit, m_impl->float32, &request);
     return m_impl->write(request);
 }
 

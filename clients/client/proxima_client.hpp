@@ -13,7 +13,9 @@
 #include <vector>
 
 #include "proxima/ccd/frame_ccd.hpp"
+#include "proxima/frame.hpp"
 #include "proxima/massive/avatar.hpp"
+#include "proxima/massive/review.hpp"
 #include "proxima/massive/verify.hpp"
 #include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
@@ -144,20 +146,10 @@ struct RemoteScene {
     std::uint64_t triangle_count = 0;
 };
 
-// One frame to send: the scene changes (object ids are the daemon's) and the queries to run.
-struct FrameRequest {
-    std::uint64_t frame = 0;
-    SceneUpdate update;
-    QueryRequest queries;
-    bool self_points = false;
-    // Continuous collisions from the positions before this frame to those after it (the frame
-    // may then only move vertices). ccd.elementary.min_distance is sent; the other CcdRequest
-    // fields are the daemon's defaults.
-    bool ccd = false;
-    ccd::CcdRequest ccd_request;
-    // Local penetration vectors of intersecting objects (collisions are returned too).
-    bool penetration = false;
-};
+// One frame to send: the scene changes (object ids are the daemon's) and the queries to run
+// (fields: frame, update, queries, self_points, ccd, ccd_request, penetration). The engine's type
+// (proxima/frame.hpp), shared with the daemon and proto/wire.
+using FrameRequest = ::proxima::FrameRequest;
 
 struct FrameResponse {
     std::string scene_id;
@@ -217,24 +209,13 @@ struct RemoteVerifySummary {
     double server_seconds = 0;
 };
 
-struct ReviewJoin {
-    std::string room;
-    std::string model;
-    std::string member;
-    NamedMesh avatar;  // in its own coordinates; poses place it
-    double tolerance = 0.0;
-    bool nearest = true;
-};
+// Joining a review room (fields: room, model, member, avatar in its own coordinates, tolerance,
+// nearest = true). These review names are the engine's types (proxima/massive/review.hpp),
+// shared with the daemon and proto/wire.
+using ReviewJoin = massive::ReviewJoinRequest;
 
 // What members see of each other's poses.
-struct ReviewPoseSummary {
-    std::uint32_t collisions = 0;
-    std::uint32_t within = 0;
-    bool has_nearest = false;
-    std::uint32_t nearest_object = 0;
-    std::string nearest_name;
-    double nearest_distance = 0.0;
-};
+using ReviewPoseSummary = massive::PoseSummary;
 
 struct ReviewMemberInfo {
     std::string name;
@@ -254,16 +235,9 @@ struct ReviewJoined {
 };
 
 // A pose's answer, in the engine's type (object indices are the room's: stored objects, then
-// added ones), with the objects' names beside it.
-struct ReviewPoseResult {
-    std::uint64_t sequence = 0;
-    massive::AvatarResult result;
-    std::vector<std::string> collision_names;
-    std::vector<std::string> within_names;
-    std::string nearest_name;
-    std::uint64_t model_version = 0;  // the edits this pose saw
-    double server_seconds = 0;
-};
+// added ones), with the objects' names beside it, the edits it saw (model_version) and
+// server_seconds.
+using ReviewPoseResult = massive::PoseResult;
 
 struct ReviewPeerUpdate {
     std::string member;
@@ -273,16 +247,11 @@ struct ReviewPeerUpdate {
     std::uint64_t model_version = 0;
 };
 
-enum class ReviewEditKind { move, add, remove };
+using ReviewEditKind = massive::EditKind;  // move, add, remove
 
-struct ReviewEditApplied {
-    std::string member;  // who edited
-    std::uint64_t sequence = 0;
-    ReviewEditKind what = ReviewEditKind::move;
-    std::uint32_t object = 0;  // moved / deleted object, or the added object's new index
-    std::string object_name;
-    std::uint64_t model_version = 0;
-};
+// An edit the room applied (fields: member who edited, sequence, what, object: the moved /
+// deleted object or the added object's new index, object_name, model_version).
+using ReviewEditApplied = massive::EditEvent;
 
 struct ReviewEvent {
     enum class Kind { joined, result, peer, edit_applied, member_joined, member_left };

@@ -11,6 +11,8 @@
 //   2: an UploadChunk stream's payload: a header (ScalarType, counts) then vertex and index bytes,
 //      decoded as a finished upload is (decode_vertex_bytes, decode_indices, add_objects).
 //   3: a ReviewRequest: decode_review_request.
+// Every request the daemon accepts is also encoded again the client's way (proto/wire) and must
+// decode to the same request.
 //
 // fuzz_frames (slow: the queries too). The input is case 0's frames, run to the end: every
 // requested query on fuzzed-but-valid geometry, then the result's encoding. Its executions cost
@@ -30,14 +32,17 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 #include <google/protobuf/stubs/logging.h>
 
 #include "auth.hpp"
-#include "convert.hpp"
 #include "frames.hpp"
 #include "proxima/v1/proxima.pb.h"
+#include "proxima/wire/buffers.hpp"
+#include "proxima/wire/frames.hpp"
+#include "proxima/wire/massive.hpp"
 #include "scene_registry.hpp"
 
 namespace {
@@ -132,6 +137,40 @@ void check_charged(const SceneEntry& entry) {
     check(charged.bytes == scene_bytes(vertices, triangles), "charged bytes = the scene's");
 }
 
+// An accepted request, encoded the client's way (proto/wire, float64 vertices), must be accepted
+// again and must come back as the same request: encoding the second decoding gives the very same
+// bytes as encoding the first.
+void check_reencoded(const FrameRequest& decoded, const std::string& scene_id) {
+    v1::Frame once;
+    wire::encode_frame(decoded, scene_id, false, &once);
+    auto again = wire::decode_frame(once);
+    check(again.ok(), "the client's encoding of an accepted frame is accepted");
+    v1::Frame twice;
+    wire::encode_frame(again.value(), scene_id, false, &twice);
+    check(once.SerializeAsString() == twice.SerializeAsString(),
+          "an accepted frame survives the client's encoding unchanged");
+}
+
+void check_reencoded(const massive::ReviewRequest& decoded) {
+    const auto encode = [](const massive::ReviewRequest& r, v1::ReviewRequest* out) {
+        if (const auto* join = std::get_if<massive::ReviewJoinRequest>(&r)) {
+            wire::encode_review_join(*join, false, out);
+        } else if (const auto* pose = std::get_if<massive::ReviewPoseRequest>(&r)) {
+            wire::encode_review_pose(*pose, out);
+        } else {
+            wire::encode_review_edit(std::get<massive::ReviewEditRequest>(r), false, out);
+        }
+    };
+    v1::ReviewRequest once;
+    encode(decoded, &once);
+    auto again = wire::decode_review_request(once);
+    check(again.ok(), "the client's encoding of an accepted review request is accepted");
+    v1::ReviewRequest twice;
+    encode(again.value(), &twice);
+    check(once.SerializeAsString() == twice.SerializeAsString(),
+          "an accepted review request survives the client's encoding unchanged");
+}
+
 void run_frames(std::string_view rest, bool queries) {
     const Limits limits = small_limits();
     auto owned = make_entry();
@@ -155,6 +194,9 @@ void run_frames(std::string_view rest, bool queries) {
         v1::Frame frame;
         if (!frame.ParseFromArray(bytes.data(), static_cast<int>(bytes.size()))) {
             return;
+        }
+        if (auto decoded = wire::decode_frame(frame); decoded.ok()) {
+            check_reencoded(decoded.value(), frame.scene_id());
         }
         // The daemon's own bound on a frame's work is the call's deadline; CCD between
         // degenerate (coplanar, crossing) objects may use its whole per-test work bound, so a
@@ -188,7 +230,7 @@ void run_frames(std::string_view rest, bool queries) {
     if (!request.ParseFromArray(rest.data(), static_cast<int>(rest.size()))) {
         return;
     }
-    auto meshes = decode_meshes(request.objects(), "objects");
+    auto meshes = wire::decode_meshes(request.objects(), "objects");
     if (!meshes.ok()) {
         return;
     }
@@ -214,13 +256,13 @@ void run_frames(std::string_view rest, bool queries) {
     rest.remove_prefix(3);
     const std::string_view vertices = rest.substr(0, vertex_bytes);
     const std::string_view indices = rest.substr(vertices.size());
-    auto decoded = decode_vertex_bytes(type, vertices, "vertex_bytes");
-    const std::size_t stride = vertex_stride(type);
+    auto decoded = wire::decode_vertex_bytes(type, vertices, "vertex_bytes");
+    const std::size_t stride = wire::vertex_stride(type);
     if (decoded.ok()) {
         check(stride != 0 && decoded.value().size() * stride == vertices.size(),
               "vertex count matches the bytes");
     }
-    auto triangles = decode_indices(indices, "index_bytes");
+    auto triangles = wire::decode_indices(indices, "index_bytes");
     if (triangles.ok()) {
         check(triangles.value().size() * 12 == indices.size(), "index count matches the bytes");
     }
@@ -246,7 +288,10 @@ void run_frames(std::string_view rest, bool queries) {
     if (!request.ParseFromArray(rest.data(), static_cast<int>(rest.size()))) {
         return;
     }
-    (void)decode_review_request(request);
+    auto decoded = wire::decode_review_request(request);
+    if (decoded.ok()) {
+        check_reencoded(decoded.value());
+    }
 }
 
 }  // namespace

@@ -1,0 +1,52 @@
+#pragma once
+// Massive models on the wire: transforms, cache counters, VerifyModel's events and the Review
+// stream (requests from the client, room events from the daemon), in both directions.
+
+#include <string>
+
+#include "proxima/massive/review.hpp"
+#include "proxima/massive/store.hpp"
+#include "proxima/massive/verify.hpp"
+#include "proxima/status.hpp"
+#include "proxima/v1/proxima.pb.h"
+
+namespace proxima::wire {
+
+// Exactly 12 finite doubles, row-major 3x4 (invalid_argument naming `what` otherwise).
+void encode_transform(const massive::Affine& transform, v1::Transform* out);
+StatusOr<massive::Affine> decode_transform(const v1::Transform& transform, const std::string& what);
+
+void encode_cache_stats(const massive::CacheStats& stats, v1::CacheStats* out);
+massive::CacheStats decode_cache_stats(const v1::CacheStats& stats);
+
+void encode_progress(const massive::Progress& progress, v1::VerifyProgress* out);
+massive::Progress decode_progress(const v1::VerifyProgress& progress);
+
+// Names come from the store's objects.
+void encode_object_pair(const massive::ObjectPairResult& pair, const massive::Store& store,
+                        v1::ObjectPairResult* out);
+massive::ObjectPairResult decode_object_pair(const v1::ObjectPairResult& pair, std::string* name_a,
+                                             std::string* name_b);
+
+void encode_verify_stats(const massive::VerifyStats& stats, double server_seconds,
+                         v1::VerifyStats* out);
+massive::VerifyStats decode_verify_stats(const v1::VerifyStats& stats);
+
+// --- Review: requests (client -> daemon) ---
+
+void encode_review_join(const massive::ReviewJoinRequest& join, bool float32,
+                        v1::ReviewRequest* out);
+void encode_review_pose(const massive::ReviewPoseRequest& pose, v1::ReviewRequest* out);
+void encode_review_edit(const massive::ReviewEditRequest& edit, bool float32,
+                        v1::ReviewRequest* out);
+// The avatar and an added object are decoded as meshes (wire format); the engine validates them
+// (validate_mesh) before anything changes.
+StatusOr<massive::ReviewRequest> decode_review_request(const v1::ReviewRequest& request);
+
+// --- Review: room events (daemon -> client) ---
+
+void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out);
+// A malformed event (empty, an unknown edit kind, a bad transform) is an internal error.
+StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event);
+
+}  // namespace proxima::wire
