@@ -159,9 +159,10 @@ TEST(ServerConfig, NegativeUnsignedFlagsAreRefused) {
         EXPECT_EQ(exit_code(load({flag, "+3"})), 2) << flag;
         EXPECT_EQ(exit_code(load({flag, " 3"})), 2) << flag;
     }
-    auto o = load({"--max-scenes", "3", "--cache-bytes", "0"});
+    auto o = load({"--max-scenes", "3", "--cache-bytes", "1048576"});
     ASSERT_TRUE(std::holds_alternative<ServerConfig>(o));
     EXPECT_EQ(std::get<ServerConfig>(o).limits.max_scenes, 3u);
+    EXPECT_EQ(std::get<ServerConfig>(o).cache_bytes, 1048576u);
 }
 
 }  // namespace
