@@ -842,6 +842,7 @@ int run_streams(const Options& opt) {
               std::to_string(opt.stream - 1) + " (ms)";
     t.header = {"scene",  "triangles", "build (frame 0)", "median",     "p99", "max",
                 "p99 / median", "max / median", "cullers (frames)", "frames with Voronoi stage"};
+    std::uint64_t unasked_voronoi = 0;
     for (const auto& name : names) {
         std::fprintf(stderr, "stream %s: %zu frames...\n", name.c_str(), opt.stream);
         const auto s = run_stream(name, opt);
@@ -859,6 +860,9 @@ int run_streams(const Options& opt) {
         t.rows.push_back({s.name, std::to_string(s.triangles), ms(s.build), ms(med), ms(p99),
                           ms(mx), bench::fixed(p99 / med, 2), bench::fixed(mx / med, 2), used,
                           std::to_string(s.voronoi_frames)});
+        if (opt.culler == CullerKind::automatic) {
+            unasked_voronoi += s.voronoi_frames;
+        }
     }
     t.notes = {"frame = Scene::apply of the frame's update + ProximityEngine::query; p99 by "
                "nearest rank; real/<scene> alternates the pair's t1, t0, t1, ..."};
@@ -867,6 +871,13 @@ int run_streams(const Options& opt) {
         std::ofstream md(opt.markdown);
         md << "Command: `" << opt.command_line << "`\n";
         t.markdown(md);
+    }
+    // Nothing in these streams asks for a Voronoi culler, so `auto` must never run one (issue #14:
+    // no exploration on a client's frame).
+    if (unasked_voronoi > 0) {
+        std::printf("FAILED: culler auto ran a Voronoi stage on %llu frames nobody asked for\n",
+                    static_cast<unsigned long long>(unasked_voronoi));
+        return 3;
     }
     return 0;
 }
