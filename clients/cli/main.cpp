@@ -3,7 +3,9 @@
 // through the engine, or through a daemon's frame stream, and prints per-frame results; `info`
 // shows what a daemon reports about itself. Both modes build the same QueryResult and print it
 // through the same code, so their outputs differ only in timings.
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -325,6 +327,38 @@ void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
     std::fflush(stdout);
 }
 
+// Per-frame time spread of a stream, over frames 1.. (frame 0 builds the scene): median, p99
+// (nearest rank) and max, and their ratios to the median. A frame far above the median is a stall
+// the client sees (issue #14: no frame may cost more than 1.5x the median by the service's choice).
+struct Spread {
+    double median = 0, p99 = 0, max = 0;
+};
+
+Spread spread_of(std::vector<double> v) {
+    Spread s;
+    if (v.empty()) {
+        return s;
+    }
+    std::sort(v.begin(), v.end());
+    const std::size_t n = v.size();
+    s.median = n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    const auto rank = static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(n)));
+    s.p99 = v[std::max<std::size_t>(rank, 1) - 1];
+    s.max = v.back();
+    return s;
+}
+
+void print_demo_spread(const DemoArgs& args, const char* what, const std::vector<double>& ms) {
+    if (args.json || ms.size() < 2) {
+        return;
+    }
+    const Spread s = spread_of({ms.begin() + 1, ms.end()});
+    std::printf(
+        "%s per frame, frames 1..%zu: median %.2f ms, p99 %.2f ms (p99/median %.2f), max %.2f ms "
+        "(max/median %.2f)\n",
+        what, ms.size() - 1, s.median, s.p99, s.p99 / s.median, s.max, s.max / s.median);
+}
+
 void print_demo_header(const DemoArgs& args, const scenes::ProceduralScene& scene) {
     if (args.json) {
         return;
@@ -355,6 +389,7 @@ int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
         return fail(r.status());
     }
     print_demo_header(args, scene);
+    std::vector<double> engine_ms;
     for (std::size_t k = 0; k < scene.frame_count; ++k) {
         if (k > 0) {
             if (auto r = engine.scene().apply(scene.step(k, engine.scene())); !r.ok()) {
@@ -367,7 +402,9 @@ int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
         }
         print_demo_frame(args, k, engine.scene().size(), engine.scene().triangle_count(),
                          result.value(), std::nullopt);
+        engine_ms.push_back(result->stats.total_seconds * 1e3);
     }
+    print_demo_spread(args, "engine time", engine_ms);
     return 0;
 }
 
@@ -468,6 +505,8 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
     Scene mirror;
     IdMap ids;
     print_demo_header(args, scene);
+    std::vector<double> engine_ms;
+    std::vector<double> rtt_ms;
     for (std::size_t k = 0; k < scene.frame_count; ++k) {
         SceneUpdate local_update;
         if (k == 0) {
@@ -507,10 +546,14 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
         }
         print_demo_frame(args, k, mirror.size(), mirror.triangle_count(), response->result,
                          round_trip_ms);
+        engine_ms.push_back(response->result.stats.total_seconds * 1e3);
+        rtt_ms.push_back(round_trip_ms);
     }
     if (auto st = frames.finish(); !st.ok()) {
         return fail(st);
     }
+    print_demo_spread(args, "engine time", engine_ms);
+    print_demo_spread(args, "round trip", rtt_ms);
     return 0;
 }
 

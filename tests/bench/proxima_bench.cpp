@@ -24,6 +24,7 @@
 #include <functional>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 #include <random>
@@ -330,6 +331,8 @@ struct Options {
     std::string data = PROXIMA_DATA_DIR;
     std::vector<std::string> scenes;  // empty: all
     std::string command_line;
+    std::size_t stream = 0;            // --stream N: only the per-frame stream spread
+    CullerKind culler = CullerKind::automatic;  // of the stream
 };
 
 bool wanted(const Options& opt, const std::string& name) {
@@ -348,7 +351,13 @@ int usage(const char* argv0, int code) {
                  "  --threads N    cap TBB's parallelism (default: all cores)\n"
                  "  --markdown F   also write the tables as Markdown to F\n"
                  "  --data DIR     folder holding frames/<scene>/ (default: %s)\n"
-                 "  --scenes LIST  only these scenes (procedural or real names)\n",
+                 "  --scenes LIST  only these scenes (procedural or real names)\n"
+                 "  --stream N     instead: stream N frames per scene with the demo's query\n"
+                 "                 (separation + self + collisions) and print each stream's\n"
+                 "                 per-frame median, p99 and max; scenes: procedural names or\n"
+                 "                 real/<frames scene> (t0, t1, t0, ...), default\n"
+                 "                 cloth-ball,real/armadillo-rollers,real/cloth-funnel\n"
+                 "  --culler NAME  the stream's culler (default auto)\n",
                  argv0, PROXIMA_DATA_DIR);
     return code;
 }
@@ -701,6 +710,178 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
     return s;
 }
 
+// ---- Per-frame stream spread (issue #14, "no spikes"): one engine, N lockstep frames with the
+// demo's query (separation + self + collisions), each frame = apply the update + query. What a
+// client sees is the spread of these times: p99 and max against the median.
+struct StreamSummary {
+    std::string name;
+    std::size_t triangles = 0;
+    std::vector<double> frame;  // seconds, frames 1..N-1 (frame 0 builds)
+    double build = 0;
+    std::map<std::string, std::size_t> cullers;  // culler -> frames it ran (1..N-1)
+    std::uint64_t voronoi_frames = 0;           // frames 1..N-1 that ran Stage II (dvd samples)
+    std::string skipped;
+};
+
+double percentile_of(std::vector<double> v, double q) {
+    if (v.empty()) {
+        return std::nan("");
+    }
+    std::sort(v.begin(), v.end());
+    const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
+    return v[std::max<std::size_t>(rank, 1) - 1];  // nearest rank
+}
+
+StreamSummary run_stream(const std::string& name, const Options& opt) {
+    StreamSummary s;
+    s.name = name;
+    QueryRequest request;
+    request.separation = true;
+    request.self = true;
+    request.collisions = true;
+    request.culler = opt.culler;
+    ProximityEngine engine;
+    // Frame k's update (k >= 1); frame 0 adds the objects.
+    std::function<StatusOr<SceneUpdate>(std::size_t)> step;
+    std::optional<scenes::ProceduralScene> procedural;
+    std::optional<FramePair> pair;
+    if (name.rfind("real/", 0) == 0) {
+        namespace fs = std::filesystem;
+        const fs::path dir = fs::path(opt.data) / "frames" / name.substr(5);
+        std::vector<std::string> files;
+        std::error_code ec;
+        for (const auto& entry : fs::directory_iterator(dir, ec)) {
+            if (entry.path().extension() == ".ply") {
+                files.push_back(entry.path().string());
+            }
+        }
+        std::sort(files.begin(), files.end());
+        if (ec || files.size() != 2) {
+            s.skipped = "no frame pair in " + dir.string();
+            return s;
+        }
+        auto loaded = load_pair(files[0], files[1]);
+        if (!loaded.ok()) {
+            s.skipped = loaded.status().to_string();
+            return s;
+        }
+        pair = std::move(loaded).value();
+        for (std::size_t c = 0; c < pair->t0.size(); ++c) {
+            if (auto id = engine.scene().add_object({name + "." + std::to_string(c), pair->t0[c]});
+                !id.ok()) {
+                s.skipped = id.status().to_string();
+                return s;
+            }
+        }
+        step = [&](std::size_t k) -> StatusOr<SceneUpdate> {
+            SceneUpdate u;
+            for (std::size_t i = 0; i < engine.scene().size(); ++i) {
+                u.positions.push_back(
+                    {engine.scene()[i].id, k % 2 == 1 ? pair->t1[i] : pair->t0[i].vertices});
+            }
+            return u;
+        };
+    } else {
+        procedural = scenes::by_name(name, opt.stream);
+        if (procedural->name.empty()) {
+            s.skipped = "unknown scene";
+            return s;
+        }
+        SceneUpdate first;
+        first.additions = procedural->initial;
+        if (auto r = engine.scene().apply(std::move(first)); !r.ok()) {
+            s.skipped = r.status().to_string();
+            return s;
+        }
+        step = [&](std::size_t k) -> StatusOr<SceneUpdate> {
+            return procedural->step(k, engine.scene());
+        };
+    }
+    for (std::size_t k = 0; k < opt.stream; ++k) {
+        double update = 0;
+        if (k > 0) {
+            auto u = step(k);
+            if (!u.ok()) {
+                s.skipped = u.status().to_string();
+                return s;
+            }
+            const auto t0 = Clock::now();
+            auto applied = engine.scene().apply(std::move(u).value());
+            update = seconds_since(t0);
+            if (!applied.ok()) {
+                s.skipped = applied.status().to_string();
+                return s;
+            }
+        }
+        auto r = engine.query(request);
+        if (!r.ok()) {
+            s.skipped = r.status().to_string();
+            return s;
+        }
+        const double frame = update + r->stats.total_seconds;
+        if (k == 0) {
+            s.build = frame;
+            continue;
+        }
+        s.frame.push_back(frame);
+        ++s.cullers[r->stats.culler];
+        s.voronoi_frames += r->stats.dvd_samples > 0 ? 1 : 0;
+    }
+    s.triangles = engine.scene().triangle_count();
+    return s;
+}
+
+int run_streams(const Options& opt) {
+    std::vector<std::string> names = opt.scenes;
+    if (names.empty()) {
+        names = {"cloth-ball", "real/armadillo-rollers", "real/cloth-funnel"};
+    }
+    Table t;
+    t.title = "Per-frame stream: separation + self + collisions, culler " +
+              std::string(culler_name(opt.culler)) + ", frames 1.." +
+              std::to_string(opt.stream - 1) + " (ms)";
+    t.header = {"scene",  "triangles", "build (frame 0)", "median",     "p99", "max",
+                "p99 / median", "max / median", "cullers (frames)", "frames with Voronoi stage"};
+    std::uint64_t unasked_voronoi = 0;
+    for (const auto& name : names) {
+        std::fprintf(stderr, "stream %s: %zu frames...\n", name.c_str(), opt.stream);
+        const auto s = run_stream(name, opt);
+        if (!s.skipped.empty()) {
+            std::printf("skipping stream '%s': %s\n", name.c_str(), s.skipped.c_str());
+            continue;
+        }
+        const double med = bench::median(s.frame);
+        const double p99 = percentile_of(s.frame, 0.99);
+        const double mx = *std::max_element(s.frame.begin(), s.frame.end());
+        std::string used;
+        for (const auto& [c, n] : s.cullers) {
+            used += (used.empty() ? "" : ", ") + c + " " + std::to_string(n);
+        }
+        t.rows.push_back({s.name, std::to_string(s.triangles), ms(s.build), ms(med), ms(p99),
+                          ms(mx), bench::fixed(p99 / med, 2), bench::fixed(mx / med, 2), used,
+                          std::to_string(s.voronoi_frames)});
+        if (opt.culler == CullerKind::automatic) {
+            unasked_voronoi += s.voronoi_frames;
+        }
+    }
+    t.notes = {"frame = Scene::apply of the frame's update + ProximityEngine::query; p99 by "
+               "nearest rank; real/<scene> alternates the pair's t1, t0, t1, ..."};
+    t.print(std::cout);
+    if (!opt.markdown.empty()) {
+        std::ofstream md(opt.markdown);
+        md << "Command: `" << opt.command_line << "`\n";
+        t.markdown(md);
+    }
+    // Nothing in these streams asks for a Voronoi culler, so `auto` must never run one (issue #14:
+    // no exploration on a client's frame).
+    if (unasked_voronoi > 0) {
+        std::printf("FAILED: culler auto ran a Voronoi stage on %llu frames nobody asked for\n",
+                    static_cast<unsigned long long>(unasked_voronoi));
+        return 3;
+    }
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -753,6 +934,15 @@ int main(int argc, char** argv) {
                     opt.scenes.push_back(name);
                 }
             }
+        } else if (a == "--stream") {
+            opt.stream = static_cast<std::size_t>(number());
+        } else if (a == "--culler") {
+            auto c = parse_culler(value());
+            if (!c.ok()) {
+                std::fprintf(stderr, "--culler: %s\n", c.status().to_string().c_str());
+                return 2;
+            }
+            opt.culler = c.value();
         } else if (a == "--help" || a == "-h") {
             return usage(argv[0], 0);
         } else {
@@ -782,6 +972,16 @@ int main(int argc, char** argv) {
     std::printf("proxima_bench: %s\n", opt.command_line.c_str());
     std::printf("machine: %d CPUs (nproc), %s; TBB threads: %d; %s\n", host.cpus,
                 host.model.c_str(), host.threads, host.date.c_str());
+    if (opt.stream > 0) {
+        if (opt.stream < 3) {
+            std::fprintf(stderr, "--stream must be at least 3 (frame 0 is the build)\n");
+            return 2;
+        }
+        std::printf("1-minute load average %s at the start\n", load_average().c_str());
+        const int rc = run_streams(opt);
+        std::printf("1-minute load average %s at the end\n", load_average().c_str());
+        return rc;
+    }
     const std::string load_start = load_average();
     const double exact_test = exact_test_seconds();
     std::printf("one exact triangle-triangle distance test: %.0f ns (single thread)\n",

@@ -239,7 +239,11 @@ class ServerCli(unittest.TestCase):
                 self.daemon.address)
         self.assertEqual(p.returncode, 0, p.stderr)
         self.assertIn("rtt-ms", p.stdout)
-        self.assertEqual(len(p.stdout.strip().splitlines()), 5)  # 3 header lines, 2 frames
+        # 3 header lines, 2 frames, the per-frame spread of engine time and round trip
+        lines = p.stdout.strip().splitlines()
+        self.assertEqual(len(lines), 7)
+        self.assertTrue(lines[5].startswith("engine time per frame, frames 1..1: median"), lines[5])
+        self.assertIn("p99/median", lines[6])
 
     def test_info(self):
         info = self.json_of("info", "--server", self.daemon.address, "--json")

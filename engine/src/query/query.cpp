@@ -597,40 +597,52 @@ StatusOr<Culler*> ProximityEngine::culler_for(CullerKind kind) {
 }
 
 namespace {
-// The automatic choice: measure both candidates on the first queries of each kind of request,
-// keep the cheaper, and measure the other again every AUTO_REMEASURE queries (scenes change).
-constexpr std::uint64_t AUTO_REMEASURE = 32;
-
 std::size_t request_shape(const QueryRequest& r) {
     return (r.separation ? 1u : 0u) | (r.self ? 2u : 0u) | (r.collisions ? 4u : 0u) |
            (r.tolerance ? 8u : 0u) | (r.pns ? 16u : 0u);
 }
 }  // namespace
 
+// The automatic choice (issue #14, "no spikes"): it decides from what it has measured and never
+// runs a culler only to measure it. The BVH culler is the default: on every scene measured (see
+// docs/benchmarks.md) the Voronoi culler costs 4-77x more on the CPU, and more on an H200 too,
+// so measuring it on a client's frame costs that frame a stall of that size. A Voronoi culler is
+// chosen only when a query that asked for it by name (the client's own exploration) measured it
+// cheaper than the BVH culler's last measurement for the same kind of request; each frame it then
+// runs re-measures it, so it is dropped again as soon as it gets slower.
 CullerKind ProximityEngine::choose_automatic(const QueryRequest& request) {
-    const CullerKind voronoi = m_gpu_backend ? CullerKind::voronoi_gpu : CullerKind::voronoi_cpu;
     const AutoModel& m = m_auto[request_shape(request)];
-    if (m.bvh_seconds < 0) {
-        return CullerKind::bvh;
+    CullerKind best = CullerKind::bvh;
+    double best_seconds = m.bvh_seconds;
+    auto consider = [&](CullerKind kind, double seconds) {
+        if (seconds >= 0 && best_seconds >= 0 && seconds < best_seconds) {
+            best = kind;
+            best_seconds = seconds;
+        }
+    };
+    consider(CullerKind::voronoi_cpu, m.voronoi_cpu_seconds);
+    if (m_gpu_backend) {
+        consider(CullerKind::voronoi_gpu, m.voronoi_gpu_seconds);
     }
-    if (m.voronoi_seconds < 0) {
-        return voronoi;
-    }
-    const bool voronoi_better = m.voronoi_seconds < m.bvh_seconds;
-    if (m.queries % AUTO_REMEASURE == 0) {
-        return voronoi_better ? CullerKind::bvh : voronoi;
-    }
-    return voronoi_better ? voronoi : CullerKind::bvh;
+    return best;
 }
 
 void ProximityEngine::record_automatic(const QueryRequest& request, CullerKind kind,
                                        double seconds) {
     AutoModel& m = m_auto[request_shape(request)];
-    ++m.queries;
-    if (kind == CullerKind::bvh) {
-        m.bvh_seconds = seconds;
-    } else {
-        m.voronoi_seconds = seconds;
+    switch (kind) {
+        case CullerKind::bvh:
+            m.bvh_seconds = seconds;
+            break;
+        case CullerKind::voronoi_cpu:
+            m.voronoi_cpu_seconds = seconds;
+            break;
+        case CullerKind::voronoi_gpu:
+            m.voronoi_gpu_seconds = seconds;
+            break;
+        case CullerKind::automatic:
+        case CullerKind::brute:
+            break;
     }
 }
 
@@ -647,7 +659,7 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     }
     if (request.culler == CullerKind::automatic) {
         // The cost model picks; a Voronoi culler that fails (a GPU error) falls back to the BVH
-        // culler for this query and counts as infinitely slow until measured again.
+        // culler for this query and counts as infinitely slow until asked for by name again.
         QueryRequest forced = request;
         forced.culler = choose_automatic(request);
         auto r = query(forced, cancel);
@@ -658,10 +670,7 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
             forced.culler = CullerKind::bvh;
             r = query(forced, cancel);
         }
-        if (r.ok()) {
-            record_automatic(request, forced.culler, r->stats.total_seconds);
-        }
-        return r;
+        return r;  // the query that ran recorded its time
     }
     const auto t_start = Clock::now();
     QueryResult result;
@@ -763,6 +772,8 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     stats.voronoi_culled = vs.culled;
     stats.dvd_epsilon = vs.epsilon;
     stats.total_seconds = seconds_since(t_start);
+    // Every culler's measured time feeds the automatic choice (no query runs only to measure).
+    record_automatic(request, request.culler, stats.total_seconds);
     return result;
 }
 

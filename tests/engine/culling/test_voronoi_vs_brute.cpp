@@ -304,8 +304,8 @@ TEST(VoronoiVsBrute, FoldedSheetsCullAndAgree) {
     EXPECT_GT(culled, 0u);
 }
 
-// Selection: names, the GPU precondition, a bad cell size, and `automatic` measuring both
-// candidates (never the GPU when none is set) and always answering like brute force.
+// Selection: names, the GPU precondition, a bad cell size, and `automatic` choosing the BVH
+// culler on a fresh engine and answering like brute force.
 // Found by fuzz_frames (tests/fuzz/regressions/frames/): a tolerance near the largest double
 // overflowed the band's boxes to infinity and the bucket coordinates to NaN (SIGSEGV), and one far
 // vertex with a small cell made the sampling visit ~10^8 grid points (22 s under ASan, no deadline
@@ -363,18 +363,103 @@ TEST(VoronoiVsBrute, SelectionAndErrors) {
     add_scene(brute, meshes);
     auto b = brute.query(full_request(CullerKind::brute, 0.1));
     ASSERT_TRUE(b.ok());
-    std::vector<std::string> used;
-    for (int q = 0; q < 6; ++q) {
+    for (int q = 0; q < 3; ++q) {
         auto r = engine.query(full_request(CullerKind::automatic, 0.1));
         ASSERT_TRUE(r.ok());
-        used.push_back(r->stats.culler);
+        EXPECT_EQ(r->stats.culler, "bvh");
         expect_equal_answers(engine.scene(), r.value(), b.value(),
                              "auto query " + std::to_string(q));
     }
-    EXPECT_EQ(used[0], "bvh");
-    EXPECT_EQ(used[1], "voronoi-cpu");
-    for (const auto& u : used) {
-        EXPECT_TRUE(u == "bvh" || u == "voronoi-cpu") << u;
+}
+
+// Issue #14 ("no spikes"): `automatic` used to run the Voronoi culler on the second query and
+// every 32nd to measure it, a 10-70x stall on those frames. It now never runs a Voronoi culler
+// nobody asked for: 70 queries with moving vertices, every one BVH with no Stage II, every one
+// equal to brute force; with a GPU backend set (the daemon's case) too.
+TEST(VoronoiVsBrute, AutomaticNeverExploresUnasked) {
+    Rng rng(80200);
+    const auto meshes = test::random_scene(rng);
+    std::string reason;
+    auto gpu = gpu_backend(&reason);
+    for (const bool with_gpu : {false, true}) {
+        if (with_gpu && !gpu) {
+            std::cout << "no GPU backend (" << reason << "): CPU engine only\n";
+            continue;
+        }
+        ProximityEngine engine;
+        ProximityEngine brute;
+        if (with_gpu) {
+            engine.set_gpu_backend(gpu);
+        }
+        add_scene(engine, meshes);
+        add_scene(brute, meshes);
+        for (int q = 0; q < 70; ++q) {
+            const std::string where =
+                (with_gpu ? "gpu engine, auto query " : "cpu engine, auto query ") +
+                std::to_string(q);
+            if (q > 0) {
+                // A small rigid shift of one object each query: a stream of changing frames.
+                SceneUpdate u;
+                const std::size_t i = static_cast<std::size_t>(q) % engine.scene().size();
+                auto moved = engine.scene()[i].vertices;
+                for (auto& v : moved) {
+                    v.x += (q % 2 == 0 ? 1e-3 : -1e-3);
+                }
+                u.positions.push_back({engine.scene()[i].id, moved});
+                SceneUpdate ub;
+                ub.positions.push_back({brute.scene()[i].id, moved});
+                ASSERT_TRUE(engine.scene().apply(std::move(u)).ok());
+                ASSERT_TRUE(brute.scene().apply(std::move(ub)).ok());
+            }
+            auto r = engine.query(full_request(CullerKind::automatic, 0.1));
+            auto b = brute.query(full_request(CullerKind::brute, 0.1));
+            ASSERT_TRUE(r.ok()) << r.status().to_string();
+            ASSERT_TRUE(b.ok()) << b.status().to_string();
+            EXPECT_EQ(r->stats.culler, "bvh") << where;
+            EXPECT_EQ(r->stats.dvd_samples, 0u) << where;
+            EXPECT_EQ(r->stats.voronoi_seconds, 0.0) << where;
+            expect_equal_answers(engine.scene(), r.value(), b.value(), where);
+        }
+    }
+}
+
+// A client asks for the Voronoi culler by name (its own exploration, on its own frame): from then
+// on `automatic` keeps whichever of the two was measured cheaper for this kind of request, each
+// frame's run re-measuring the culler it used. The choice is predicted here from the times the
+// queries report, and every answer equals brute force.
+TEST(VoronoiVsBrute, AutomaticChoosesVoronoiOnlyFromMeasurementsAskedFor) {
+    Rng rng(80300);
+    const auto meshes = test::random_scene(rng);
+    ProximityEngine engine;
+    ProximityEngine brute;
+    add_scene(engine, meshes);
+    add_scene(brute, meshes);
+    auto b = brute.query(full_request(CullerKind::brute, 0.1));
+    ASSERT_TRUE(b.ok());
+    double bvh = -1;
+    double voronoi = -1;
+    auto expect_auto = [&](const std::string& where) {
+        auto r = engine.query(full_request(CullerKind::automatic, 0.1));
+        ASSERT_TRUE(r.ok()) << r.status().to_string();
+        const bool want_voronoi = voronoi >= 0 && bvh >= 0 && voronoi < bvh;
+        EXPECT_EQ(r->stats.culler, want_voronoi ? "voronoi-cpu" : "bvh")
+            << where << ": bvh " << bvh << " s, voronoi " << voronoi << " s";
+        (r->stats.culler == "bvh" ? bvh : voronoi) = r->stats.total_seconds;
+        expect_equal_answers(engine.scene(), r.value(), b.value(), where);
+    };
+    expect_auto("first auto query");
+    expect_auto("second auto query");
+    // Brute force asked for by name is never a candidate of `automatic`.
+    auto forced = engine.query(full_request(CullerKind::brute, 0.1));
+    ASSERT_TRUE(forced.ok());
+    expect_auto("after a brute query");
+    auto asked = engine.query(full_request(CullerKind::voronoi_cpu, 0.1));
+    ASSERT_TRUE(asked.ok()) << asked.status().to_string();
+    EXPECT_EQ(asked->stats.culler, "voronoi-cpu");
+    expect_equal_answers(engine.scene(), asked.value(), b.value(), "asked voronoi-cpu");
+    voronoi = asked->stats.total_seconds;
+    for (int q = 0; q < 6; ++q) {
+        expect_auto("auto query " + std::to_string(q) + " after asking for voronoi-cpu");
     }
 }
 

@@ -45,6 +45,9 @@ struct QueryRequest {
     bool collisions = false;
     std::optional<double> tolerance;  // report pairs with distance <= tolerance (>= 0)
     bool pns = false;                 // report the culler's candidates for the tolerance (or 0)
+    // `automatic`: the BVH culler, unless a Voronoi culler was asked for by name on this scene
+    // (same kind of request) and measured cheaper than the BVH culler's last frame. It never runs
+    // a culler just to measure it, so no frame pays for exploration it did not ask for.
     CullerKind culler = CullerKind::automatic;
     // Grid cell size of the discrete-Voronoi cullers (> 0, scene units); unset: automatic
     // (a multiple of the mean edge length).
@@ -137,7 +140,7 @@ class ProximityEngine {
     StatusOr<QueryResult> query(const QueryRequest& request, const CancelToken* cancel = nullptr);
 
     // The GPU backend of the discrete-Voronoi kernel (gpu::make_egl_backend), or null for none.
-    // Without one, `voronoi_gpu` is refused and `automatic` chooses among the CPU cullers.
+    // Without one, `voronoi_gpu` is refused (and `automatic` never chooses it).
     void set_gpu_backend(std::shared_ptr<dvd::Backend> backend);
     // Why there is no GPU backend (shown in the failed_precondition message), e.g. the EGL error.
     void set_gpu_unavailable_reason(std::string reason) { m_gpu_reason = std::move(reason); }
@@ -155,11 +158,13 @@ class ProximityEngine {
     std::unique_ptr<Culler> m_voronoi_gpu;
     std::shared_ptr<dvd::Backend> m_gpu_backend;
     std::string m_gpu_reason = "no GPU backend was set";
-    // The automatic choice's cost model, per kind of request (which queries it asks).
+    // The automatic choice's cost model, per kind of request (which queries it asks): the last
+    // measured total of each culler on this scene, from queries that ran it anyway (chosen by
+    // `automatic` or asked for by name). `automatic` never runs a culler only to measure it.
     struct AutoModel {
-        std::uint64_t queries = 0;
-        double bvh_seconds = -1;      // last measured total, < 0: not yet
-        double voronoi_seconds = -1;  // of the Voronoi culler on the best backend
+        double bvh_seconds = -1;          // < 0: not measured
+        double voronoi_cpu_seconds = -1;  // infinity: failed when `automatic` chose it
+        double voronoi_gpu_seconds = -1;
     };
     std::array<AutoModel, 32> m_auto{};
     SweepAndPrune m_sap;
