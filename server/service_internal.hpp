@@ -232,8 +232,8 @@ class StreamAdmission {
     // Null until admit() authenticated the call.
     const std::shared_ptr<Principal>& principal() const { return m_principal; }
     const std::string& who() const {
-        static const std::string unknown = "-";
-        return m_principal ? m_principal->log_name() : unknown;
+        static const std::string UNKNOWN = "-";
+        return m_principal ? m_principal->log_name() : UNKNOWN;
     }
 
   private:

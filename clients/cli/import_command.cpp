@@ -61,8 +61,7 @@ StatusOr<massive::StoreSummary> import_plant(const ImportArgs& args,
     }
     // Objects go straight from the generator into the writer: the model is never held whole.
     auto generated = massive::generate_plant(
-        plant,
-        [&](massive::ModelObject&& object) { return writer.value()->add(std::move(object)); },
+        plant, [&](massive::ModelObject&& object) { return writer.value()->add(object); },
         printer.callback());
     if (!generated.ok()) {
         return generated.status();

@@ -86,8 +86,7 @@ std::shared_ptr<const Store> plant_store(const fs::path& dir, std::uint64_t tria
     EXPECT_TRUE(writer.ok()) << writer.status().to_string();
     PlantOptions plant;
     plant.triangles = triangles;
-    auto summary =
-        generate_plant(plant, [&](ModelObject&& o) { return (*writer)->add(std::move(o)); });
+    auto summary = generate_plant(plant, [&](ModelObject&& o) { return (*writer)->add(o); });
     EXPECT_TRUE(summary.ok()) << summary.status().to_string();
     auto committed = (*writer)->commit();
     EXPECT_TRUE(committed.ok()) << committed.status().to_string();
