@@ -21,6 +21,8 @@ packages=(
   python3 python3-grpcio python3-protobuf python3-numpy binutils
   # Service hardening: TLS test certificates, Prometheus metrics, libFuzzer targets (clang).
   openssl libssl-dev prometheus-cpp-dev clang libclang-rt-14-dev
+  # The lint stage of deploy/test.sh.
+  clang-format clang-tidy
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
