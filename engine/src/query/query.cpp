@@ -382,38 +382,38 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                                       centroid[t] = (x[0] + x[1] + x[2]) / 3.0;
                                   }
                               });
-            tbb::parallel_for(
-                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
-                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                        if (!partner.empty() && partner[t] != UINT32_MAX) {
-                            seed[t] = partner[t];
-                            continue;
-                        }
-                        double nearest = std::numeric_limits<double>::infinity();
-                        for (auto u : topo.cached_two_ring(t)) {
-                            const double d = squared_norm(centroid[u] - centroid[t]);
-                            if (d < nearest) {
-                                nearest = d;
-                                seed[t] = u;
-                            }
-                        }
-                    }
-                });
-            tbb::parallel_for(
-                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
-                    if (work.should_stop()) {
-                        return;
-                    }
-                    std::uint64_t count = 0;
-                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                        const std::uint32_t u = seed[t];
-                        if (u == UINT32_MAX || (u < t && seed[u] == t)) {
-                            continue;
-                        }
-                        test(t, u, corners(obj, t), count);
-                    }
-                    tests += count;
-                });
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
+                              [&](const auto& range) {
+                                  for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                                      if (!partner.empty() && partner[t] != UINT32_MAX) {
+                                          seed[t] = partner[t];
+                                          continue;
+                                      }
+                                      double nearest = std::numeric_limits<double>::infinity();
+                                      for (auto u : topo.cached_two_ring(t)) {
+                                          const double d = squared_norm(centroid[u] - centroid[t]);
+                                          if (d < nearest) {
+                                              nearest = d;
+                                              seed[t] = u;
+                                          }
+                                      }
+                                  }
+                              });
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
+                              [&](const auto& range) {
+                                  if (work.should_stop()) {
+                                      return;
+                                  }
+                                  std::uint64_t count = 0;
+                                  for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                                      const std::uint32_t u = seed[t];
+                                      if (u == UINT32_MAX || (u < t && seed[u] == t)) {
+                                          continue;
+                                      }
+                                      test(t, u, corners(obj, t), count);
+                                  }
+                                  tests += count;
+                              });
         }
         if (work.should_stop()) {
             return;
