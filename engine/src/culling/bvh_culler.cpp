@@ -2,6 +2,7 @@
 // culled by box distance against the current best widened by the rounding slack, so rounding in
 // the box arithmetic can never drop a pair whose computed distance would be the answer.
 #include <algorithm>
+#include <cmath>
 #include <unordered_map>
 
 #include <tbb/blocked_range.h>
@@ -224,6 +225,59 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     const auto& order = bvh.order();
     const auto& tris = scene[a].topology->triangles();
     const double slack = pair_slack(scene, a, a);
+    auto threshold_of = [&](std::uint32_t t) { return cull_threshold_sq(bound_sq(t), slack); };
+    // Triangles still without a finite bound (no seed: e.g. no non-adjacent 2-ring triangle, or
+    // one whose seeds all went to others) would make every ancestor's threshold infinite below,
+    // so the dual traversal would pair each of their leaves with every leaf of the object: on an
+    // object of many disjoint components that is almost all of the work. Each gets a nearest-first
+    // search of the hierarchy with its own bound instead, which tightens as it goes; these visits
+    // only add candidates, the dual traversal below still proposes every pair it needs.
+    std::vector<std::uint32_t> unbounded;
+    for (std::uint32_t t = 0; t < static_cast<std::uint32_t>(tris.size()); ++t) {
+        if (!std::isfinite(bound_sq(t))) {
+            unbounded.push_back(t);
+        }
+    }
+    if (!unbounded.empty() && !nodes.empty()) {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, unbounded.size(), 16), [&](const auto& range) {
+                std::vector<std::pair<double, std::uint32_t>> stack;
+                for (auto k = range.begin(); k != range.end(); ++k) {
+                    const std::uint32_t t = unbounded[k];
+                    const Aabb& bt = boxes[t];
+                    stack.assign(1, {box_squared_distance(bt, nodes[0].box), 0u});
+                    while (!stack.empty()) {
+                        const auto [d, i] = stack.back();
+                        stack.pop_back();
+                        if (d >= threshold_of(t)) {
+                            continue;
+                        }
+                        const auto& n = nodes[i];
+                        if (n.leaf()) {
+                            for (auto q = n.first; q < n.first + n.count; ++q) {
+                                const auto u = order[q];
+                                if (u == t || share_vertex(tris[t], tris[u])) {
+                                    continue;
+                                }
+                                if (box_squared_distance(bt, boxes[u]) < threshold_of(t)) {
+                                    visit(std::min(t, u), std::max(t, u));
+                                }
+                            }
+                            continue;
+                        }
+                        std::pair<double, std::uint32_t> c1{
+                            box_squared_distance(bt, nodes[i + 1].box), i + 1};
+                        std::pair<double, std::uint32_t> c2{
+                            box_squared_distance(bt, nodes[n.first].box), n.first};
+                        if (c1.first < c2.first) {
+                            std::swap(c1, c2);  // the nearer child is pushed last
+                        }
+                        stack.push_back(c1);
+                        stack.push_back(c2);
+                    }
+                }
+            });
+    }
     // Largest bound per subtree, bottom-up (children have larger indices than their parent).
     std::vector<double> node_threshold(nodes.size());
     for (auto i = nodes.size(); i-- > 0;) {
@@ -238,7 +292,6 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
             node_threshold[i] = std::max(node_threshold[i + 1], node_threshold[n.first]);
         }
     }
-    auto threshold_of = [&](std::uint32_t t) { return cull_threshold_sq(bound_sq(t), slack); };
     auto leaves = [&](const Bvh::Node& x, const Bvh::Node& y, bool same_node) {
         double ty[Bvh::LEAF_SIZE];
         for (std::uint32_t q = 0; q < y.count; ++q) {

@@ -279,5 +279,89 @@ TEST(QueriesVsBrute, FoldedSheetsCullAndAgree) {
     }
 }
 
+// One object made of many disjoint components (as a simulation file read without
+// --split-components): closed spheres near and far from each other, open sheets, tetrahedra (whose
+// four triangles are all adjacent, so they have no partner inside their component) and lone
+// triangles. Many triangles start the self search without a seed, which is what made the traversal
+// slow on such objects; the answer must still equal brute force's, tie-breaks included.
+TriangleMesh many_components(Rng& rng, int count) {
+    TriangleMesh all;
+    auto append = [&](const TriangleMesh& m) {
+        const auto base = static_cast<std::uint32_t>(all.vertices.size());
+        all.vertices.insert(all.vertices.end(), m.vertices.begin(), m.vertices.end());
+        for (const auto& t : m.triangles) {
+            all.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+        }
+    };
+    for (int k = 0; k < count; ++k) {
+        // Clustered in a few places, so some components nearly touch and some are far apart.
+        const double spread = k % 3 == 0 ? 8.0 : 2.0;
+        const Vec3 at{test::uniform(rng, 0, spread), test::uniform(rng, 0, spread),
+                      test::uniform(rng, 0, spread)};
+        TriangleMesh m;
+        switch (std::uniform_int_distribution<int>(0, 5)(rng)) {
+            case 0:
+            case 1:
+                m = test::sphere(rng, std::uniform_int_distribution<int>(3, 6)(rng),
+                                 std::uniform_int_distribution<int>(3, 8)(rng), 1.0, 0.1);
+                break;
+            case 2:
+                m = test::sheet(rng, std::uniform_int_distribution<int>(1, 5)(rng),
+                                std::uniform_int_distribution<int>(1, 4)(rng),
+                                test::uniform(rng, 0.01, 0.3));
+                break;
+            case 3:
+                m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+                m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+                break;
+            case 4:
+                m = test::box({0, 0, 0}, {1, 1, 1});
+                break;
+            default:
+                m.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+                m.triangles = {{0, 1, 2}};
+        }
+        test::transform(m, test::uniform(rng, 0.1, 0.5), at, test::uniform(rng, 0, 6));
+        append(m);
+    }
+    return all;
+}
+
+TEST(QueriesVsBrute, ManyComponentsInOneObject) {
+    for (std::uint64_t seed = 40000; seed < 40024; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        ProximityEngine brute;
+        const auto m = many_components(rng, std::uniform_int_distribution<int>(2, 40)(rng));
+        ASSERT_TRUE(bvh.scene().add_object({"many", m}).ok());
+        ASSERT_TRUE(brute.scene().add_object({"many", m}).ok());
+        if (seed % 2 == 0) {
+            // A second object, also of several components, so separation is checked too.
+            const auto o = many_components(rng, 5);
+            ASSERT_TRUE(bvh.scene().add_object({"other", o}).ok());
+            ASSERT_TRUE(brute.scene().add_object({"other", o}).ok());
+        }
+        auto a = bvh.query(full_request(CullerKind::bvh, 0.05));
+        auto b = brute.query(full_request(CullerKind::brute, 0.05));
+        ASSERT_TRUE(a.ok() && b.ok());
+        const std::string where = "seed " + std::to_string(seed);
+        expect_equal_answers(bvh.scene(), a.value(), b.value(), where);
+        // And on moved positions (a refit, the seeds from the previous answer do not carry over).
+        const auto moved = test::jitter(rng, m.vertices, 0.05);
+        for (ProximityEngine* e : {&bvh, &brute}) {
+            SceneUpdate update;
+            update.positions.push_back({e->scene()[0].id, moved});
+            ASSERT_TRUE(e->scene().apply(std::move(update)).ok());
+        }
+        a = bvh.query(full_request(CullerKind::bvh, 0.05));
+        b = brute.query(full_request(CullerKind::brute, 0.05));
+        ASSERT_TRUE(a.ok() && b.ok());
+        expect_equal_answers(bvh.scene(), a.value(), b.value(), where + " moved");
+        if (HasFatalFailure()) {
+            return;
+        }
+    }
+}
+
 }  // namespace
 }  // namespace proxima
