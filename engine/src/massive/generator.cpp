@@ -710,137 +710,155 @@ std::string object_name(std::uint32_t bay, const std::string& what) {
     return buf.data() + what;
 }
 
-// One bay: a frame, one or two tanks, pipe runs on every level but the top, walkways on the top
-// level and, often, stairs to the first level. Absolute coordinates (the bay's cell at x0, y0);
-// every contact that should be exact is between values computed by the same expression.
-std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x0, double y0) {
-    Rng rng(mix64(seed ^ mix64(bay)));
+// The planning of one bay, step by step; the steps draw from one generator, in this order: the
+// layout, the tanks, the pipe runs, the walkways, the stairs.
+struct BayPlanner {
+    BayPlanner(std::uint64_t seed, std::uint32_t bay_index, double x, double y)
+        : rng(mix64(seed ^ mix64(bay_index))), bay(bay_index), x0(x), y0(y) {}
+
+    Rng rng;
+    std::uint32_t bay;
+    double x0;
+    double y0;
     Frame f;
-    f.x0 = x0;
-    f.y0 = y0;
-    f.w = rng.pick(std::array{9.0, 12.0, 15.0});
-    f.d = rng.pick(std::array{8.0, 9.0, 10.0});
-    const int levels = 2 + static_cast<int>(rng.index(2));
-    const double level_height = rng.grid(4.0, 5.0, 0.25);
-    for (int l = 0; l < levels; ++l) {
-        f.levels.push_back(level_height * (l + 1));
-    }
-    const double top = f.levels.back();
-    const double w = f.w;
-    const double d = f.d;
-    // Columns are wider than girders (so their faces never share a vertex position with a
-    // girder end).
-    f.column_depth = rng.pick(std::array{0.3, 0.35, 0.4});
-    f.girder_width = rng.pick(std::array{0.2, 0.24, 0.28});
-    const double cd = f.column_depth;
-    const double gw = f.girder_width;
-    const double gd = rng.pick(std::array{0.3, 0.36, 0.45});
-
-    std::vector<double> columns = {0.0, w};
-    if (w >= 12.0) {
-        columns.insert(columns.begin() + 1, 0.5 * w);
-    }
+    int levels = 0;
+    double top = 0.0;
+    double gd = 0.0;  // girder depth
+    std::vector<double> columns;
     std::vector<double> secondary;
-    if (w == 9.0) {
-        secondary = {0.5 * w};
-    } else if (w == 15.0) {
-        secondary = {0.25 * w, 0.75 * w};
-    }
-    // The top level also carries deck beams at w/4 and 3w/4 (the horizontal tank's saddles).
-    std::vector<double> deck = secondary;
-    for (double x : {0.25 * w, 0.75 * w}) {
-        if (std::find(deck.begin(), deck.end(), x) == deck.end()) {
-            deck.push_back(x);
-        }
-    }
-    std::sort(deck.begin(), deck.end());
-    for (int l = 0; l < levels; ++l) {
-        std::vector<double> s;
-        s.reserve(columns.size() + std::max(deck.size(), secondary.size()));
-        for (double x : columns) {
-            s.push_back(x0 + x);
-        }
-        for (double x : (l + 1 == levels ? deck : secondary)) {
-            s.push_back(x0 + x);
-        }
-        std::sort(s.begin(), s.end());
-        f.supports.push_back(std::move(s));
-    }
-
-    std::vector<ObjectPlan> objects;
-    // --- The frame.
-    ObjectPlan frame{object_name(bay, "frame"), {}};
-    for (double c : columns) {
-        for (double y : {0.0, d}) {
-            frame.parts.push_back(
-                Beam{2, 1, 0, 0.0, top, y0 + y, x0 + c + 0.5 * cd, cd, cd, 0.02, 0.012});
-        }
-    }
-    for (int l = 0; l < levels; ++l) {
-        const double z = f.levels[static_cast<std::size_t>(l)];
-        for (double y : {0.0, d}) {
-            for (std::size_t c = 0; c + 1 < columns.size(); ++c) {
-                frame.parts.push_back(Beam{0, 1, 2, x0 + columns[c] + 0.5 * cd,
-                                           x0 + columns[c + 1] - 0.5 * cd, y0 + y, z, gw, gd, 0.016,
-                                           0.01});
-            }
-        }
-        for (double c : columns) {
-            frame.parts.push_back(
-                Beam{1, 0, 2, y0 + 0.5 * cd, y0 + d - 0.5 * cd, x0 + c, z, gw, gd, 0.016, 0.01});
-        }
-        for (double x : (l + 1 == levels ? deck : secondary)) {
-            frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * gw, y0 + d - 0.5 * gw, x0 + x, z, gw,
-                                       gd - 0.06, 0.014, 0.009});
-        }
-    }
-    objects.push_back(std::move(frame));
-
-    // --- Tanks: a vertical one beside the frame (+y) on a pad, a horizontal one on saddles on
-    // the top deck beams.
-    const bool vertical_tank = rng.chance(0.75);
-    const bool horizontal_tank = rng.chance(0.6) || !vertical_tank;
+    std::vector<double> deck;
+    // The vertical tank (the first level's last pipe may end in it).
+    bool vertical_tank = false;
     double tank_x = 0.0;
     double tank_y = 0.0;
     double tank_r = 0.0;
-    int tanks = 0;
-    if (vertical_tank) {
-        tank_r = rng.grid(1.0, 3.0, 0.25);
-        tank_x = x0 + rng.grid(0.35 * w, 0.65 * w, 0.25);
-        tank_y = y0 + d + 1.0 + tank_r;
-        const double height = rng.grid(6.0, 13.0, 0.5);
-        ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
-        const double pad = tank_r + 0.3;
-        tank.parts.push_back(
-            Box{{tank_x - pad, tank_y - pad, 0.0}, {tank_x + pad, tank_y + pad, 0.3}});
-        tank.parts.push_back(
-            Vessel{{tank_x, tank_y, 0.3}, Z_AXIS, X_AXIS, tank_r, height, false, true});
-        objects.push_back(std::move(tank));
-    }
-    if (horizontal_tank) {
-        const double r = rng.grid(0.8, std::min(2.0, 0.5 * d - 1.6), 0.1);
-        const double length = rng.grid(0.55 * w, 0.85 * w - r, 0.25);
-        const double saddle = rng.grid(0.25, 0.5, 0.05);
-        const double yc = y0 + 0.5 * d;
-        const double zc = top + saddle + r;
-        ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
-        tank.parts.push_back(
-            Vessel{{x0 + 0.5 * w - 0.5 * length, yc, zc}, X_AXIS, -Z_AXIS, r, length, true, true});
-        for (double x : {0.25 * w, 0.75 * w}) {
-            tank.parts.push_back(Box{{x0 + x - 0.08, yc - 0.7 * r, top},
-                                     {x0 + x + 0.08, yc + 0.7 * r, zc - 0.5 * r}});
+    std::vector<ObjectPlan> objects;
+
+    // The frame's size, levels and sections, the x of its columns and beams, and the beams
+    // under the pipes of every level.
+    void plan_layout() {
+        f.x0 = x0;
+        f.y0 = y0;
+        f.w = rng.pick(std::array{9.0, 12.0, 15.0});
+        f.d = rng.pick(std::array{8.0, 9.0, 10.0});
+        levels = 2 + static_cast<int>(rng.index(2));
+        const double level_height = rng.grid(4.0, 5.0, 0.25);
+        for (int l = 0; l < levels; ++l) {
+            f.levels.push_back(level_height * (l + 1));
         }
-        objects.push_back(std::move(tank));
+        top = f.levels.back();
+        const double w = f.w;
+        // Columns are wider than girders (so their faces never share a vertex position with a
+        // girder end).
+        f.column_depth = rng.pick(std::array{0.3, 0.35, 0.4});
+        f.girder_width = rng.pick(std::array{0.2, 0.24, 0.28});
+        gd = rng.pick(std::array{0.3, 0.36, 0.45});
+
+        columns = {0.0, w};
+        if (w >= 12.0) {
+            columns.insert(columns.begin() + 1, 0.5 * w);
+        }
+        if (w == 9.0) {
+            secondary = {0.5 * w};
+        } else if (w == 15.0) {
+            secondary = {0.25 * w, 0.75 * w};
+        }
+        // The top level also carries deck beams at w/4 and 3w/4 (the horizontal tank's saddles).
+        deck = secondary;
+        for (double x : {0.25 * w, 0.75 * w}) {
+            if (std::find(deck.begin(), deck.end(), x) == deck.end()) {
+                deck.push_back(x);
+            }
+        }
+        std::sort(deck.begin(), deck.end());
+        for (int l = 0; l < levels; ++l) {
+            std::vector<double> s;
+            s.reserve(columns.size() + std::max(deck.size(), secondary.size()));
+            for (double x : columns) {
+                s.push_back(x0 + x);
+            }
+            for (double x : (l + 1 == levels ? deck : secondary)) {
+                s.push_back(x0 + x);
+            }
+            std::sort(s.begin(), s.end());
+            f.supports.push_back(std::move(s));
+        }
     }
 
-    // --- Pipe runs: on each level below the top, lanes side by side a few millimetres to a few
-    // centimetres apart, a few millimetres to centimetres above the beams they cross. Risers of
-    // higher levels stand outside the horizontal extent of lower levels.
-    int pipes = 0;
-    for (int l = 0; l + 1 < levels; ++l) {
-        const double level_z = f.levels[static_cast<std::size_t>(l)];
-        const double margin = 0.5 + 1.2 * (levels - 2 - l);
-        // Lanes side by side from the -y side: (radius, y).
+    // The frame: columns, girders along x and y on every level, secondary (or deck) beams.
+    void plan_frame() {
+        const double d = f.d;
+        const double cd = f.column_depth;
+        const double gw = f.girder_width;
+        ObjectPlan frame{object_name(bay, "frame"), {}};
+        for (double c : columns) {
+            for (double y : {0.0, d}) {
+                frame.parts.push_back(
+                    Beam{2, 1, 0, 0.0, top, y0 + y, x0 + c + 0.5 * cd, cd, cd, 0.02, 0.012});
+            }
+        }
+        for (int l = 0; l < levels; ++l) {
+            const double z = f.levels[static_cast<std::size_t>(l)];
+            for (double y : {0.0, d}) {
+                for (std::size_t c = 0; c + 1 < columns.size(); ++c) {
+                    frame.parts.push_back(Beam{0, 1, 2, x0 + columns[c] + 0.5 * cd,
+                                               x0 + columns[c + 1] - 0.5 * cd, y0 + y, z, gw, gd,
+                                               0.016, 0.01});
+                }
+            }
+            for (double c : columns) {
+                frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * cd, y0 + d - 0.5 * cd, x0 + c, z, gw,
+                                           gd, 0.016, 0.01});
+            }
+            for (double x : (l + 1 == levels ? deck : secondary)) {
+                frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * gw, y0 + d - 0.5 * gw, x0 + x, z, gw,
+                                           gd - 0.06, 0.014, 0.009});
+            }
+        }
+        objects.push_back(std::move(frame));
+    }
+
+    // Tanks: a vertical one beside the frame (+y) on a pad, a horizontal one on saddles on the
+    // top deck beams.
+    void plan_tanks() {
+        const double w = f.w;
+        const double d = f.d;
+        vertical_tank = rng.chance(0.75);
+        const bool horizontal_tank = rng.chance(0.6) || !vertical_tank;
+        int tanks = 0;
+        if (vertical_tank) {
+            tank_r = rng.grid(1.0, 3.0, 0.25);
+            tank_x = x0 + rng.grid(0.35 * w, 0.65 * w, 0.25);
+            tank_y = y0 + d + 1.0 + tank_r;
+            const double height = rng.grid(6.0, 13.0, 0.5);
+            ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
+            const double pad = tank_r + 0.3;
+            tank.parts.push_back(
+                Box{{tank_x - pad, tank_y - pad, 0.0}, {tank_x + pad, tank_y + pad, 0.3}});
+            tank.parts.push_back(
+                Vessel{{tank_x, tank_y, 0.3}, Z_AXIS, X_AXIS, tank_r, height, false, true});
+            objects.push_back(std::move(tank));
+        }
+        if (horizontal_tank) {
+            const double r = rng.grid(0.8, std::min(2.0, 0.5 * d - 1.6), 0.1);
+            const double length = rng.grid(0.55 * w, 0.85 * w - r, 0.25);
+            const double saddle = rng.grid(0.25, 0.5, 0.05);
+            const double yc = y0 + 0.5 * d;
+            const double zc = top + saddle + r;
+            ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
+            tank.parts.push_back(Vessel{
+                {x0 + 0.5 * w - 0.5 * length, yc, zc}, X_AXIS, -Z_AXIS, r, length, true, true});
+            for (double x : {0.25 * w, 0.75 * w}) {
+                tank.parts.push_back(Box{{x0 + x - 0.08, yc - 0.7 * r, top},
+                                         {x0 + x + 0.08, yc + 0.7 * r, zc - 0.5 * r}});
+            }
+            objects.push_back(std::move(tank));
+        }
+    }
+
+    // Lanes side by side from the -y side, a few millimetres to a few centimetres apart:
+    // (radius, y).
+    std::vector<std::pair<double, double>> plan_lanes() {
         const int wanted = 2 + static_cast<int>(rng.index(4));
         std::vector<std::pair<double, double>> lanes;
         for (int i = 0; i < wanted; ++i) {
@@ -848,89 +866,126 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
             const double gap = 0.004 + 0.056 * sq(rng.uniform());
             const double yl =
                 lanes.empty() ? y0 + 0.8 + r : lanes.back().second + lanes.back().first + gap + r;
-            if (yl + r > y0 + d - 1.0) {
+            if (yl + r > y0 + f.d - 1.0) {
                 break;
             }
             lanes.emplace_back(r, yl);
         }
-        for (std::size_t i = 0; i < lanes.size(); ++i) {
-            const auto [r, yl] = lanes[i];
-            const double clearance = 0.003 + 0.047 * sq(rng.uniform());
-            const double zc = level_z + clearance + r;
-            const double xs = x0 + margin + rng.uniform(0.0, 0.9);
-            const double xe = x0 + w - margin - rng.uniform(0.0, 0.9);
-            PipeRun run;
-            run.radius = r;
-            run.level = static_cast<std::size_t>(l);
+        return lanes;
+    }
+
+    // The run of lane i of level l: from grade or over the -y girder, along the lane, then into
+    // the vertical tank, over the -y girder or down to grade (or ending in the air).
+    PipeRun plan_run(int l, std::size_t i, const std::vector<std::pair<double, double>>& lanes,
+                     double margin) {
+        const double level_z = f.levels[static_cast<std::size_t>(l)];
+        const auto [r, yl] = lanes[i];
+        const double clearance = 0.003 + 0.047 * sq(rng.uniform());
+        const double zc = level_z + clearance + r;
+        const double xs = x0 + margin + rng.uniform(0.0, 0.9);
+        const double xe = x0 + f.w - margin - rng.uniform(0.0, 0.9);
+        PipeRun run;
+        run.radius = r;
+        run.level = static_cast<std::size_t>(l);
+        if (i == 0 && rng.chance(0.4)) {
+            run.points.push_back({xs, y0 - 1.5, zc});  // enters over the -y girder
+        } else {
+            run.points.push_back({xs, yl, rng.grid(0.3, 1.2, 0.1)});  // riser from grade
+        }
+        run.points.push_back({xs, yl, zc});
+        const bool last_lane = i + 1 == lanes.size();
+        const double tank_reach = tank_x - 0.5 * tank_r;
+        const double pipe_x = std::max(tank_reach, xs + 6.0 * r + 0.6);
+        if (vertical_tank && l == 0 && last_lane && pipe_x < tank_x + 0.6 * tank_r) {
+            // Into the vertical tank's shell, with a nozzle flange outside it.
+            const double dx = pipe_x - tank_x;
+            const double wall = tank_y - std::sqrt(tank_r * tank_r - dx * dx);
+            run.points.push_back({pipe_x, yl, zc});
+            run.points.push_back({pipe_x, wall + 0.1, zc});
+            run.open_end = true;
+            run.nozzle = 0.3;
+        } else {
+            run.points.push_back({xe, yl, zc});
             if (i == 0 && rng.chance(0.4)) {
-                run.points.push_back({xs, y0 - 1.5, zc});  // enters over the -y girder
-            } else {
-                run.points.push_back({xs, yl, rng.grid(0.3, 1.2, 0.1)});  // riser from grade
-            }
-            run.points.push_back({xs, yl, zc});
-            const bool last_lane = i + 1 == lanes.size();
-            const double tank_reach = tank_x - 0.5 * tank_r;
-            const double pipe_x = std::max(tank_reach, xs + 6.0 * r + 0.6);
-            if (vertical_tank && l == 0 && last_lane && pipe_x < tank_x + 0.6 * tank_r) {
-                // Into the vertical tank's shell, with a nozzle flange outside it.
-                const double dx = pipe_x - tank_x;
-                const double wall = tank_y - std::sqrt(tank_r * tank_r - dx * dx);
-                run.points.push_back({pipe_x, yl, zc});
-                run.points.push_back({pipe_x, wall + 0.1, zc});
-                run.open_end = true;
-                run.nozzle = 0.3;
-            } else {
-                run.points.push_back({xe, yl, zc});
-                if (i == 0 && rng.chance(0.4)) {
-                    run.points.push_back({xe, y0 - 1.5, zc});  // leaves over the -y girder
-                    if (rng.chance(0.5)) {
-                        run.points.push_back({xe, y0 - 1.5, rng.grid(0.3, 1.2, 0.1)});
-                    }
-                } else if (rng.chance(0.65)) {
-                    run.points.push_back({xe, yl, rng.grid(0.3, 1.2, 0.1)});
+                run.points.push_back({xe, y0 - 1.5, zc});  // leaves over the -y girder
+                if (rng.chance(0.5)) {
+                    run.points.push_back({xe, y0 - 1.5, rng.grid(0.3, 1.2, 0.1)});
                 }
+            } else if (rng.chance(0.65)) {
+                run.points.push_back({xe, yl, rng.grid(0.3, 1.2, 0.1)});
             }
-            ObjectPlan pipe{object_name(bay, "pipe-" + std::to_string(++pipes)), {}};
-            plan_pipe(run, f, pipe);
-            objects.push_back(std::move(pipe));
+        }
+        return run;
+    }
+
+    // Pipe runs: on each level below the top, lanes a few millimetres to centimetres above the
+    // beams they cross. Risers of higher levels stand outside the horizontal extent of lower
+    // levels.
+    void plan_pipes() {
+        int pipes = 0;
+        for (int l = 0; l + 1 < levels; ++l) {
+            const double margin = 0.5 + 1.2 * (levels - 2 - l);
+            const auto lanes = plan_lanes();
+            for (std::size_t i = 0; i < lanes.size(); ++i) {
+                const PipeRun run = plan_run(l, i, lanes, margin);
+                ObjectPlan pipe{object_name(bay, "pipe-" + std::to_string(++pipes)), {}};
+                plan_pipe(run, f, pipe);
+                objects.push_back(std::move(pipe));
+            }
         }
     }
 
-    // --- Walkways on the top level along one or both long sides: a grating resting on the
-    // girders and column tops, a toe board, posts and two rails on the outer edge.
-    const std::uint32_t sides = 1 + rng.index(3);  // bit 0: -y side, bit 1: +y side
-    int walkways = 0;
-    for (int side = 0; side < 2; ++side) {
-        if ((sides & (1u << side)) == 0) {
-            continue;
+    // Walkways on the top level along one or both long sides: a grating resting on the girders
+    // and column tops, a toe board, posts and two rails on the outer edge.
+    void plan_walkways() {
+        const double w = f.w;
+        const double d = f.d;
+        const double gw = f.girder_width;
+        const std::uint32_t sides = 1 + rng.index(3);  // bit 0: -y side, bit 1: +y side
+        int walkways = 0;
+        for (int side = 0; side < 2; ++side) {
+            if ((sides & (1u << side)) == 0) {
+                continue;
+            }
+            const double edge = side == 0 ? y0 - 0.5 * gw : y0 + d + 0.5 * gw;
+            const double inner = side == 0 ? y0 + 1.0 : y0 + d - 1.0;
+            const double inward = side == 0 ? 1.0 : -1.0;
+            const double deck_top = top + 0.03;
+            ObjectPlan walkway{object_name(bay, "walkway-" + std::to_string(++walkways)), {}};
+            walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, inner), top},
+                                        {x0 + w + 0.1, std::max(edge, inner), deck_top}});
+            const double board = edge + inward * 0.01;
+            walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, board), deck_top},
+                                        {x0 + w + 0.1, std::max(edge, board), deck_top + 0.1}});
+            const double post_y = edge + inward * 0.04;
+            const int posts = static_cast<int>(std::ceil((w + 0.1) / 1.8)) + 1;
+            for (int k = 0; k < posts; ++k) {
+                const double x = x0 - 0.05 + (w + 0.1) * k / (posts - 1);
+                walkway.parts.push_back(Tube{{x, post_y, deck_top},
+                                             {x, post_y, deck_top + 1.1},
+                                             X_AXIS,
+                                             0.024,
+                                             0.5,
+                                             0.0,
+                                             4});
+            }
+            for (double z : {deck_top + 0.5, deck_top + 1.07}) {
+                walkway.parts.push_back(Tube{
+                    {x0 - 0.1, post_y, z}, {x0 + w + 0.1, post_y, z}, -Z_AXIS, 0.021, 0.5, 0.0, 4});
+            }
+            objects.push_back(std::move(walkway));
         }
-        const double edge = side == 0 ? y0 - 0.5 * gw : y0 + d + 0.5 * gw;
-        const double inner = side == 0 ? y0 + 1.0 : y0 + d - 1.0;
-        const double inward = side == 0 ? 1.0 : -1.0;
-        const double deck_top = top + 0.03;
-        ObjectPlan walkway{object_name(bay, "walkway-" + std::to_string(++walkways)), {}};
-        walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, inner), top},
-                                    {x0 + w + 0.1, std::max(edge, inner), deck_top}});
-        const double board = edge + inward * 0.01;
-        walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, board), deck_top},
-                                    {x0 + w + 0.1, std::max(edge, board), deck_top + 0.1}});
-        const double post_y = edge + inward * 0.04;
-        const int posts = static_cast<int>(std::ceil((w + 0.1) / 1.8)) + 1;
-        for (int k = 0; k < posts; ++k) {
-            const double x = x0 - 0.05 + (w + 0.1) * k / (posts - 1);
-            walkway.parts.push_back(Tube{
-                {x, post_y, deck_top}, {x, post_y, deck_top + 1.1}, X_AXIS, 0.024, 0.5, 0.0, 4});
-        }
-        for (double z : {deck_top + 0.5, deck_top + 1.07}) {
-            walkway.parts.push_back(Tube{
-                {x0 - 0.1, post_y, z}, {x0 + w + 0.1, post_y, z}, -Z_AXIS, 0.021, 0.5, 0.0, 4});
-        }
-        objects.push_back(std::move(walkway));
     }
 
-    // --- Stairs up to the first level beside the +x side, their landing a few millimetres to
+    // Stairs up to the first level beside the +x side, their landing a few millimetres to
     // centimetres from the frame.
-    if (rng.chance(0.6)) {
+    void plan_stairs() {
+        if (!rng.chance(0.6)) {
+            return;
+        }
+        const double w = f.w;
+        const double d = f.d;
+        const double gw = f.girder_width;
         const double z1 = f.levels[0];
         const int steps = static_cast<int>(std::ceil(z1 / 0.19));
         const double rise = z1 / steps;
@@ -952,7 +1007,20 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
         }
         objects.push_back(std::move(stairs));
     }
-    return objects;
+};
+
+// One bay: a frame, one or two tanks, pipe runs on every level but the top, walkways on the top
+// level and, often, stairs to the first level. Absolute coordinates (the bay's cell at x0, y0);
+// every contact that should be exact is between values computed by the same expression.
+std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x0, double y0) {
+    BayPlanner planner(seed, bay, x0, y0);
+    planner.plan_layout();
+    planner.plan_frame();
+    planner.plan_tanks();
+    planner.plan_pipes();
+    planner.plan_walkways();
+    planner.plan_stairs();
+    return std::move(planner.objects);
 }
 
 Status stop_status(const CancelToken& cancel, const std::string& what) {
