@@ -1302,10 +1302,8 @@ std::string shell_file_name(const std::string& object) {
     return "shell/" + name + ".off";
 }
 
-}  // namespace
-
-StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
-                                           const std::string& out_dir, const ProgressFn& progress) {
+// The mesh files under the furniture directory, sorted by their '/'-separated path.
+StatusOr<std::vector<std::filesystem::path>> list_furniture(const BuildingOptions& options) {
     namespace fs = std::filesystem;
     std::error_code ec;
     const fs::path root(options.furniture_dir);
@@ -1332,6 +1330,12 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
     if (files.empty()) {
         return not_found("building: no mesh files under '" + options.furniture_dir + "'");
     }
+    return files;
+}
+
+StatusOr<std::vector<FurnitureModel>> load_models(const std::filesystem::path& root,
+                                                  const std::vector<std::filesystem::path>& files,
+                                                  const ProgressFn& progress) {
     std::vector<FurnitureModel> models(files.size());
     for (std::size_t i = 0; i < files.size(); ++i) {
         if (progress) {
@@ -1344,11 +1348,13 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
     if (progress) {
         progress({"reading", files.size(), files.size(), "files"});
     }
+    return models;
+}
 
-    // Which instances: random models until the target is reached, never overshooting it by more
-    // than 2% (a smaller model is taken instead near the end).
-    Rng rng(mix64(options.seed ^ 0x6275696c64696e67ull));
-    const std::uint64_t target = options.triangles;
+// Which instances: random models until the target is reached, never overshooting it by more
+// than 2% (a smaller model is taken instead near the end).
+std::vector<std::uint32_t> pick_models(const std::vector<FurnitureModel>& models,
+                                       std::uint64_t target, Rng& rng) {
     const std::uint64_t slack = target / 50;
     std::vector<std::uint32_t> picks;
     std::uint64_t planned = 0;
@@ -1378,105 +1384,193 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
         picks.push_back(static_cast<std::uint32_t>(chosen));
         planned += models[static_cast<std::size_t>(chosen)].mesh.triangles.size();
     }
+    return picks;
+}
 
-    // The grid: about seven instances a room, about as many storeys as rooms along a side.
-    const double rooms_estimate = std::max(1.0, std::ceil(picks.size() / 7.0));
+double level(int storey) {
+    return STOREY * storey;
+}
+
+// The room grid of every storey: nx by ny rooms.
+struct RoomGrid {
+    int nx = 1;
+    int ny = 1;
+    int rooms_per_storey = 1;
+};
+
+// About seven instances a room, about as many storeys as rooms along a side.
+RoomGrid room_grid(std::size_t instances) {
+    const double rooms_estimate = std::max(1.0, std::ceil(instances / 7.0));
     const int storeys_estimate =
         std::max(1, static_cast<int>(std::lround(std::cbrt(rooms_estimate))));
     const int per_storey = static_cast<int>(std::ceil(rooms_estimate / storeys_estimate));
-    const int nx = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(per_storey))));
-    const int ny = (per_storey + nx - 1) / nx;
-    const int rooms_per_storey = nx * ny;
-    auto level = [](int storey) { return STOREY * storey; };
+    RoomGrid grid;
+    grid.nx = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(per_storey))));
+    grid.ny = (per_storey + grid.nx - 1) / grid.nx;
+    grid.rooms_per_storey = grid.nx * grid.ny;
+    return grid;
+}
 
-    // Placement: rooms in order (storey by storey), instances in rows along x from the room's
-    // -y wall. The first row stands against the wall (touching its face), the first instance of a
-    // row against the column face; neighbours touch or stand millimetres to decimetres apart;
-    // every instance stands on the slab (touching it).
-    std::vector<Instance> instances;
-    int room = 0;
-    int room_items = 0;
-    int room_capacity = 4 + static_cast<int>(rng.index(6));
-    double row_y = 0.0;
-    double row_depth = 0.0;
-    double cursor = 0.0;
-    bool row_empty = true;
-    auto room_box = [&](int k) {
-        const int storey = k / rooms_per_storey;
-        const int r = k % rooms_per_storey;
-        const int i = r % nx;
-        const int j = r / nx;
-        Aabb b;
-        b.lo = {ROOM_X * i + 0.5 * COLUMN, ROOM_Y * j + 0.5 * WALL, level(storey)};
-        b.hi = {ROOM_X * (i + 1) - 0.5 * COLUMN, ROOM_Y * (j + 1) - 0.5 * COLUMN,
-                level(storey + 1) - SLAB};
-        return b;
-    };
-    Aabb current = room_box(0);
-    auto start_room = [&](int k) {
-        room = k;
-        current = room_box(k);
-        room_items = 0;
-        room_capacity = 4 + static_cast<int>(rng.index(6));
-        row_y = current.lo.y;
-        row_depth = 0.0;
-        cursor = current.lo.x;
-        row_empty = true;
-    };
-    start_room(0);
-    static constexpr std::array<double, 6> GAPS = {0.0, 0.002, 0.01, 0.03, 0.1, 0.4};
-    static constexpr std::array<double, 4> AISLES = {0.005, 0.02, 0.05, 0.8};
-    for (std::uint32_t pick : picks) {
-        const FurnitureModel& model = models[pick];
-        auto q = static_cast<std::size_t>(rng.index(4));
-        const double gap = rng.pick(GAPS);
-        const double aisle = rng.pick(AISLES);
+// Placement: rooms in order (storey by storey), instances in rows along x from the room's -y
+// wall. The first row stands against the wall (touching its face), the first instance of a row
+// against the column face; neighbours touch or stand millimetres to decimetres apart; every
+// instance stands on the slab (touching it).
+class Placer {
+  public:
+    Placer(const RoomGrid& grid, Rng& rng)
+        : m_grid(grid),
+          m_rng(rng),
+          m_room_capacity(4 + static_cast<int>(rng.index(6))),
+          m_current(room_box(0)) {
+        start_room(0);
+    }
+
+    Status place(std::uint32_t pick, const FurnitureModel& model) {
+        static constexpr std::array<double, 6> GAPS = {0.0, 0.002, 0.01, 0.03, 0.1, 0.4};
+        static constexpr std::array<double, 4> AISLES = {0.005, 0.02, 0.05, 0.8};
+        auto q = static_cast<std::size_t>(m_rng.index(4));
+        const double gap = m_rng.pick(GAPS);
+        const double aisle = m_rng.pick(AISLES);
         // Find a place: this row, a new row, a new room (a model always fits an empty room).
         for (int tries = 0;; ++tries) {
-            const Aabb& b = model.box[q];
-            const Vec3 e = b.extent();
-            const double x = row_empty ? current.lo.x : cursor + gap;
-            const double y = row_y;
-            if (room_items < room_capacity && x + e.x <= current.hi.x && y + e.y <= current.hi.y) {
-                Affine a = model.linear[q];
-                a.m[3] = offset_onto(b.lo.x, x);
-                a.m[7] = offset_onto(b.lo.y, y);
-                a.m[11] = offset_onto(b.lo.z, current.lo.z);
-                const int storey = room / rooms_per_storey;
-                instances.push_back({pick, a,
-                                     "floor-" + std::to_string(storey) + "/room-" +
-                                         std::to_string(room % rooms_per_storey) + "/" +
-                                         model.stem + "-" + std::to_string(room_items + 1)});
-                cursor = b.hi.x + a.m[3];
-                row_depth = std::max(row_depth, (b.hi.y + a.m[7]) - row_y);
-                row_empty = false;
-                ++room_items;
-                break;
+            if (try_place(pick, model, q, gap)) {
+                return {};
             }
             if (tries > 8) {
                 q = (q + 1) % 4;  // a room too narrow for this orientation
             }
-            if (!row_empty && room_items < room_capacity) {
-                row_y = row_y + row_depth + aisle;
-                row_depth = 0.0;
-                row_empty = true;
-                cursor = current.lo.x;
+            if (!m_row_empty && m_room_items < m_room_capacity) {
+                m_row_y = m_row_y + m_row_depth + aisle;
+                m_row_depth = 0.0;
+                m_row_empty = true;
+                m_cursor = m_current.lo.x;
             } else {
-                start_room(room + 1);
+                start_room(m_room + 1);
             }
             if (tries > 64) {
                 return Status(StatusCode::internal, "building: cannot place '" + model.key + "'");
             }
         }
     }
-    const int storeys = room / rooms_per_storey + 1;
 
-    // The shell: a slab under every storey and a roof slab; per storey the columns at the grid
-    // points, and walls along every grid line between columns (touching them), each span with a
-    // door except on the outside (the ground floor has one entrance).
+    int storeys() const { return m_room / m_grid.rooms_per_storey + 1; }
+    std::vector<Instance>& instances() { return m_instances; }
+
+  private:
+    Aabb room_box(int k) const {
+        const int storey = k / m_grid.rooms_per_storey;
+        const int r = k % m_grid.rooms_per_storey;
+        const int i = r % m_grid.nx;
+        const int j = r / m_grid.nx;
+        Aabb b;
+        b.lo = {ROOM_X * i + 0.5 * COLUMN, ROOM_Y * j + 0.5 * WALL, level(storey)};
+        b.hi = {ROOM_X * (i + 1) - 0.5 * COLUMN, ROOM_Y * (j + 1) - 0.5 * COLUMN,
+                level(storey + 1) - SLAB};
+        return b;
+    }
+
+    void start_room(int k) {
+        m_room = k;
+        m_current = room_box(k);
+        m_room_items = 0;
+        m_room_capacity = 4 + static_cast<int>(m_rng.index(6));
+        m_row_y = m_current.lo.y;
+        m_row_depth = 0.0;
+        m_cursor = m_current.lo.x;
+        m_row_empty = true;
+    }
+
+    // Places the model in orientation q at the end of the current row when it fits there.
+    bool try_place(std::uint32_t pick, const FurnitureModel& model, std::size_t q, double gap) {
+        const Aabb& b = model.box[q];
+        const Vec3 e = b.extent();
+        const double x = m_row_empty ? m_current.lo.x : m_cursor + gap;
+        const double y = m_row_y;
+        if (!(m_room_items < m_room_capacity && x + e.x <= m_current.hi.x &&
+              y + e.y <= m_current.hi.y)) {
+            return false;
+        }
+        Affine a = model.linear[q];
+        a.m[3] = offset_onto(b.lo.x, x);
+        a.m[7] = offset_onto(b.lo.y, y);
+        a.m[11] = offset_onto(b.lo.z, m_current.lo.z);
+        const int storey = m_room / m_grid.rooms_per_storey;
+        m_instances.push_back({pick, a,
+                               "floor-" + std::to_string(storey) + "/room-" +
+                                   std::to_string(m_room % m_grid.rooms_per_storey) + "/" +
+                                   model.stem + "-" + std::to_string(m_room_items + 1)});
+        m_cursor = b.hi.x + a.m[3];
+        m_row_depth = std::max(m_row_depth, (b.hi.y + a.m[7]) - m_row_y);
+        m_row_empty = false;
+        ++m_room_items;
+        return true;
+    }
+
+    const RoomGrid& m_grid;
+    Rng& m_rng;
+    std::vector<Instance> m_instances;
+    int m_room = 0;
+    int m_room_items = 0;
+    int m_room_capacity;
+    double m_row_y = 0.0;
+    double m_row_depth = 0.0;
+    double m_cursor = 0.0;
+    bool m_row_empty = true;
+    Aabb m_current;
+};
+
+// The walls of storey s (z0 to z1): along x (axis 0) at y = ROOM_Y j, then along y (axis 1) at
+// x = ROOM_X i, touching the columns; each span with a door except on the outside (the ground
+// floor has one entrance).
+void plan_walls(const RoomGrid& grid, int s, const std::string& prefix, Rng& rng,
+                std::vector<ShellObject>& shell) {
+    const double z0 = level(s);
+    const double z1 = level(s + 1) - SLAB;
+    for (int axis = 0; axis < 2; ++axis) {
+        const int lines = axis == 0 ? grid.ny : grid.nx;
+        const int spans = axis == 0 ? grid.nx : grid.ny;
+        const double pitch = axis == 0 ? ROOM_X : ROOM_Y;
+        const double across = axis == 0 ? ROOM_Y : ROOM_X;
+        for (int line = 0; line <= lines; ++line) {
+            ShellObject wall{prefix + (axis == 0 ? "/wall-x-" : "/wall-y-") + std::to_string(line),
+                             {}};
+            const double c = across * line;
+            auto add = [&](double a0, double a1, double za, double zb) {
+                Box b;
+                b.lo[axis] = a0;
+                b.hi[axis] = a1;
+                b.lo[1 - axis] = c - 0.5 * WALL;
+                b.hi[1 - axis] = c + 0.5 * WALL;
+                b.lo.z = za;
+                b.hi.z = zb;
+                wall.boxes.push_back(b);
+            };
+            for (int span = 0; span < spans; ++span) {
+                const double a0 = pitch * span + 0.5 * COLUMN;
+                const double a1 = pitch * (span + 1) - 0.5 * COLUMN;
+                const bool outside = line == 0 || line == lines;
+                const bool door = !outside || (s == 0 && axis == 0 && line == 0 && span == 0);
+                if (!door) {
+                    add(a0, a1, z0, z1);
+                    continue;
+                }
+                const double d0 = rng.grid(a0 + 0.3, a1 - 0.3 - DOOR_WIDTH, 0.1);
+                const double d1 = d0 + DOOR_WIDTH;
+                add(a0, d0, z0, z1);
+                add(d0, d1, z0 + DOOR_HEIGHT, z1);
+                add(d1, a1, z0, z1);
+            }
+            shell.push_back(std::move(wall));
+        }
+    }
+}
+
+// The shell: a slab under every storey and a roof slab; per storey the columns at the grid
+// points, and the walls.
+std::vector<ShellObject> plan_shell(const RoomGrid& grid, int storeys, Rng& rng) {
     std::vector<ShellObject> shell;
-    const double x_max = ROOM_X * nx;
-    const double y_max = ROOM_Y * ny;
+    const double x_max = ROOM_X * grid.nx;
+    const double y_max = ROOM_Y * grid.ny;
     for (int s = 0; s <= storeys; ++s) {
         const std::string prefix =
             s == storeys ? std::string("roof") : "floor-" + std::to_string(s);
@@ -1489,8 +1583,8 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
         const double z0 = level(s);
         const double z1 = level(s + 1) - SLAB;
         ShellObject columns{prefix + "/columns", {}};
-        for (int i = 0; i <= nx; ++i) {
-            for (int j = 0; j <= ny; ++j) {
+        for (int i = 0; i <= grid.nx; ++i) {
+            for (int j = 0; j <= grid.ny; ++j) {
                 const double x = ROOM_X * i;
                 const double y = ROOM_Y * j;
                 columns.boxes.push_back(Box{{x - 0.5 * COLUMN, y - 0.5 * COLUMN, z0},
@@ -1498,47 +1592,117 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
             }
         }
         shell.push_back(std::move(columns));
-        // Along x (axis 0) at y = ROOM_Y j, then along y (axis 1) at x = ROOM_X i.
-        for (int axis = 0; axis < 2; ++axis) {
-            const int lines = axis == 0 ? ny : nx;
-            const int spans = axis == 0 ? nx : ny;
-            const double pitch = axis == 0 ? ROOM_X : ROOM_Y;
-            const double across = axis == 0 ? ROOM_Y : ROOM_X;
-            for (int line = 0; line <= lines; ++line) {
-                ShellObject wall{
-                    prefix + (axis == 0 ? "/wall-x-" : "/wall-y-") + std::to_string(line), {}};
-                const double c = across * line;
-                auto add = [&](double a0, double a1, double za, double zb) {
-                    Box b;
-                    b.lo[axis] = a0;
-                    b.hi[axis] = a1;
-                    b.lo[1 - axis] = c - 0.5 * WALL;
-                    b.hi[1 - axis] = c + 0.5 * WALL;
-                    b.lo.z = za;
-                    b.hi.z = zb;
-                    wall.boxes.push_back(b);
-                };
-                for (int span = 0; span < spans; ++span) {
-                    const double a0 = pitch * span + 0.5 * COLUMN;
-                    const double a1 = pitch * (span + 1) - 0.5 * COLUMN;
-                    const bool outside = line == 0 || line == lines;
-                    const bool door = !outside || (s == 0 && axis == 0 && line == 0 && span == 0);
-                    if (!door) {
-                        add(a0, a1, z0, z1);
-                        continue;
-                    }
-                    const double d0 = rng.grid(a0 + 0.3, a1 - 0.3 - DOOR_WIDTH, 0.1);
-                    const double d1 = d0 + DOOR_WIDTH;
-                    add(a0, d0, z0, z1);
-                    add(d0, d1, z0 + DOOR_HEIGHT, z1);
-                    add(d1, a1, z0, z1);
-                }
-                shell.push_back(std::move(wall));
-            }
+        plan_walls(grid, s, prefix, rng, shell);
+    }
+    return shell;
+}
+
+// The scene file's contents as they are written, and the summary.
+class SceneWriter {
+  public:
+    SceneWriter(const std::filesystem::path& out, std::size_t total_objects,
+                const ProgressFn& progress, GeneratedSummary& summary)
+        : m_out(out), m_total(total_objects), m_progress(progress), m_summary(summary) {}
+
+    // Meshes and writes one shell object (an OFF file under shell/).
+    Status add_shell(const ShellObject& object) {
+        const Affine identity;
+        ModelObject mesh_object;
+        Mesher mesher(mesh_object.mesh, m_circles, 1.0);
+        for (const Box& b : object.boxes) {
+            mesher(b);
+        }
+        m_welder.weld(mesh_object.mesh);
+        const std::string file = shell_file_name(object.name);
+        if (Status s = write_off((m_out / file).string(), mesh_object.mesh); !s.ok()) {
+            return Status(StatusCode::unavailable, "building: " + s.message());
+        }
+        for (const auto& v : mesh_object.mesh.vertices) {
+            m_summary.box.extend(identity.apply(v));
+        }
+        m_summary.objects += 1;
+        m_summary.triangles += mesh_object.mesh.triangles.size();
+        m_summary.vertices += mesh_object.mesh.vertices.size();
+        m_meshes[object.name] = file;
+        m_objects.push_back(scene_object(object.name, object.name, identity));
+        report();
+        return {};
+    }
+
+    // One furniture instance; its model's file is listed on first use.
+    void add_instance(const Instance& instance, const FurnitureModel& model, bool first_use) {
+        if (first_use) {
+            m_meshes[model.key] = model.path;
+        }
+        for (const auto& v : model.mesh.vertices) {
+            m_summary.box.extend(instance.transform.apply(v));
+        }
+        m_summary.objects += 1;
+        m_summary.triangles += model.mesh.triangles.size();
+        m_summary.vertices += model.mesh.vertices.size();
+        m_objects.push_back(scene_object(instance.name, model.key, instance.transform));
+        report();
+    }
+
+    Status write_scene(const std::string& scene_file) {
+        nlohmann::ordered_json scene;
+        scene["format"] = "proxima-scene/1";
+        scene["meshes"] = std::move(m_meshes);
+        scene["objects"] = std::move(m_objects);
+        std::ofstream file(scene_file, std::ios::binary | std::ios::trunc);
+        file << scene.dump(1) << '\n';
+        if (!file.good()) {
+            return Status(StatusCode::unavailable, "building: cannot write '" + scene_file + "'");
+        }
+        return {};
+    }
+
+  private:
+    void report() {
+        if (m_progress) {
+            m_progress({"writing", ++m_written, m_total, "objects"});
         }
     }
 
+    std::filesystem::path m_out;
+    std::size_t m_total;
+    const ProgressFn& m_progress;
+    GeneratedSummary& m_summary;
+    std::size_t m_written = 0;
+    nlohmann::ordered_json m_meshes = nlohmann::ordered_json::object();
+    nlohmann::ordered_json m_objects = nlohmann::ordered_json::array();
+    CircleCache m_circles;
+    Welder m_welder;
+};
+
+}  // namespace
+
+StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
+                                           const std::string& out_dir, const ProgressFn& progress) {
+    namespace fs = std::filesystem;
+    auto files = list_furniture(options);
+    if (!files.ok()) {
+        return files.status();
+    }
+    auto models = load_models(fs::path(options.furniture_dir), *files, progress);
+    if (!models.ok()) {
+        return models.status();
+    }
+
+    Rng rng(mix64(options.seed ^ 0x6275696c64696e67ull));
+    const std::vector<std::uint32_t> picks = pick_models(*models, options.triangles, rng);
+    const RoomGrid grid = room_grid(picks.size());
+    Placer placer(grid, rng);
+    for (std::uint32_t pick : picks) {
+        if (Status s = placer.place(pick, (*models)[pick]); !s.ok()) {
+            return s;
+        }
+    }
+    const std::vector<Instance>& instances = placer.instances();
+    const std::vector<ShellObject> shell = plan_shell(grid, placer.storeys(), rng);
+
     // Write the shell meshes and the scene file.
+    std::error_code ec;
     const fs::path out(out_dir);
     fs::create_directories(out / "shell", ec);
     if (ec) {
@@ -1546,67 +1710,21 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
                                                    (out / "shell").string() + "': " + ec.message());
     }
     GeneratedScene result;
-    GeneratedSummary& summary = result.summary;
-    nlohmann::ordered_json meshes = nlohmann::ordered_json::object();
-    nlohmann::ordered_json objects = nlohmann::ordered_json::array();
-    const Affine identity;
-    const std::size_t total_objects = shell.size() + instances.size();
-    std::size_t written = 0;
-    CircleCache circles;
-    Welder welder;
+    SceneWriter writer(out, shell.size() + instances.size(), progress, result.summary);
     for (const ShellObject& object : shell) {
-        ModelObject mesh_object;
-        Mesher mesher(mesh_object.mesh, circles, 1.0);
-        for (const Box& b : object.boxes) {
-            mesher(b);
-        }
-        welder.weld(mesh_object.mesh);
-        const std::string file = shell_file_name(object.name);
-        if (Status s = write_off((out / file).string(), mesh_object.mesh); !s.ok()) {
-            return Status(StatusCode::unavailable, "building: " + s.message());
-        }
-        for (const auto& v : mesh_object.mesh.vertices) {
-            summary.box.extend(identity.apply(v));
-        }
-        summary.objects += 1;
-        summary.triangles += mesh_object.mesh.triangles.size();
-        summary.vertices += mesh_object.mesh.vertices.size();
-        meshes[object.name] = file;
-        objects.push_back(scene_object(object.name, object.name, identity));
-        if (progress) {
-            progress({"writing", ++written, total_objects, "objects"});
+        if (Status s = writer.add_shell(object); !s.ok()) {
+            return s;
         }
     }
-    std::vector<bool> used(models.size(), false);
+    std::vector<bool> used(models->size(), false);
     for (const Instance& instance : instances) {
-        const FurnitureModel& model = models[instance.model];
-        if (!used[instance.model]) {
-            used[instance.model] = true;
-            meshes[model.key] = model.path;
-        }
-        for (const auto& v : model.mesh.vertices) {
-            summary.box.extend(instance.transform.apply(v));
-        }
-        summary.objects += 1;
-        summary.triangles += model.mesh.triangles.size();
-        summary.vertices += model.mesh.vertices.size();
-        objects.push_back(scene_object(instance.name, model.key, instance.transform));
-        if (progress) {
-            progress({"writing", ++written, total_objects, "objects"});
-        }
+        const bool first_use = !used[instance.model];
+        used[instance.model] = true;
+        writer.add_instance(instance, (*models)[instance.model], first_use);
     }
-    nlohmann::ordered_json scene;
-    scene["format"] = "proxima-scene/1";
-    scene["meshes"] = std::move(meshes);
-    scene["objects"] = std::move(objects);
     result.scene_file = (out / "scene.json").string();
-    {
-        std::ofstream file(result.scene_file, std::ios::binary | std::ios::trunc);
-        file << scene.dump(1) << '\n';
-        if (!file.good()) {
-            return Status(StatusCode::unavailable,
-                          "building: cannot write '" + result.scene_file + "'");
-        }
+    if (Status s = writer.write_scene(result.scene_file); !s.ok()) {
+        return s;
     }
     return result;
 }
