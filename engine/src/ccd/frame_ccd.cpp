@@ -509,6 +509,238 @@ std::uint64_t brute_force_count(const std::vector<ObjectData>& objects, const Cc
     return total;
 }
 
+// The caller's cancellation, latched: once a check sees it, every later check returns at once.
+class Stopper {
+  public:
+    explicit Stopper(const CancelToken* cancel) : m_cancel(cancel) {}
+
+    bool should_stop() {
+        if (m_stopped.load(std::memory_order_relaxed)) {
+            return true;
+        }
+        if (m_cancel != nullptr && m_cancel->should_stop()) {
+            m_stopped.store(true, std::memory_order_relaxed);
+            return true;
+        }
+        return false;
+    }
+
+    Status status() const {
+        if (m_cancel != nullptr && m_cancel->cancelled()) {
+            return {StatusCode::cancelled, "ccd cancelled by the caller"};
+        }
+        return {StatusCode::deadline_exceeded, "ccd stopped: deadline exceeded"};
+    }
+
+  private:
+    const CancelToken* m_cancel;
+    std::atomic<bool> m_stopped{false};
+};
+
+// Broad phase, part 1: per-object swept boxes and hierarchies. Returns the largest coordinate
+// magnitude at t0 and t1.
+double prepare_objects(const Scene& scene, std::span<const std::vector<Vec3>> positions_t1,
+                       std::vector<ObjectData>& objects) {
+    const auto n = static_cast<std::uint32_t>(objects.size());
+    double scale = 0.0;
+    for (std::uint32_t i = 0; i < n; ++i) {
+        objects[i].object = &scene[i];
+        objects[i].p1 = &positions_t1[i];
+        for (const auto& p : scene[i].vertices) {
+            scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+        }
+        for (const auto& p : positions_t1[i]) {
+            scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+        }
+    }
+    return scale;
+}
+
+// Object pairs (a < b, sorted) whose swept boxes come within `gap` (sort and sweep along x).
+std::vector<std::pair<std::uint32_t, std::uint32_t>> near_object_pairs(
+    const std::vector<ObjectData>& objects, double gap) {
+    const auto n = static_cast<std::uint32_t>(objects.size());
+    std::vector<std::uint32_t> by_x(n);
+    std::iota(by_x.begin(), by_x.end(), 0u);
+    std::sort(by_x.begin(), by_x.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return std::tie(objects[a].box.lo.x, a) < std::tie(objects[b].box.lo.x, b);
+    });
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> object_pairs;
+    for (std::uint32_t k = 0; k < n; ++k) {
+        const auto& bi = objects[by_x[k]].box;
+        for (auto l = k + 1; l < n; ++l) {
+            const auto& bj = objects[by_x[l]].box;
+            if (bj.lo.x - gap > bi.hi.x) {
+                break;  // sorted by lo.x: every later box starts further right
+            }
+            if (near(bi, bj, gap)) {
+                object_pairs.emplace_back(std::min(by_x[k], by_x[l]), std::max(by_x[k], by_x[l]));
+            }
+        }
+    }
+    std::sort(object_pairs.begin(), object_pairs.end());
+    return object_pairs;
+}
+
+// Broad phase, part 2: the root jobs (each object with itself when `self`, then the object pairs
+// whose swept boxes meet), split into jobs over node pairs.
+std::vector<Job> broad_phase_jobs(const std::vector<ObjectData>& objects, double gap,
+                                  const CcdRequest& request, CcdStats& stats) {
+    const auto n = static_cast<std::uint32_t>(objects.size());
+    std::vector<Job> roots;
+    if (request.self) {
+        for (std::uint32_t i = 0; i < n; ++i) {
+            roots.push_back({i, 0, i, 0});
+        }
+    }
+    if (request.between_objects) {
+        const auto object_pairs = near_object_pairs(objects, gap);
+        stats.object_pairs_tested = object_pairs.size();
+        for (const auto& [a, b] : object_pairs) {
+            roots.push_back({a, 0, b, 0});
+        }
+    }
+    std::vector<Job> jobs;
+    for (const auto& r : roots) {
+        split_job(objects, gap, r, jobs);
+    }
+    return jobs;
+}
+
+// Broad phase, part 3, and narrow phase, in batches of jobs so that the candidate lists stay
+// small (tens of MB, not one list of every candidate of the frame): each batch collects the
+// candidate primitive pairs of its jobs in parallel, then runs their elementary tests in
+// parallel. The hits go to per-thread lists, in no particular order.
+class BatchRunner {
+  public:
+    BatchRunner(const std::vector<ObjectData>& objects, double gap, const std::vector<Job>& jobs,
+                const CcdRequest& request, Stopper& stopper)
+        : m_objects(objects),
+          m_gap(gap),
+          m_jobs(jobs),
+          m_request(request),
+          m_stopper(stopper),
+          m_batch(std::max<std::size_t>(
+              32, 8 * static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()))),
+          m_candidates(m_batch),
+          m_offsets(m_batch + 1, 0) {}
+
+    // False when stopped (the caller's stopper then says why).
+    bool run(CcdStats& stats) {
+        for (std::size_t first_job = 0; first_job < m_jobs.size(); first_job += m_batch) {
+            const auto t0 = Clock::now();
+            const auto count = std::min(m_batch, m_jobs.size() - first_job);
+            collect(first_job, count);
+            if (m_stopper.should_stop()) {
+                return false;
+            }
+            for (std::size_t j = 0; j < count; ++j) {
+                m_offsets[j + 1] = m_offsets[j] + m_candidates[j].size();
+            }
+            stats.elementary_tests += m_offsets[count];
+            const auto t1 = Clock::now();
+            test(count);
+            if (m_stopper.should_stop()) {
+                return false;
+            }
+            const auto t2 = Clock::now();
+            stats.broad_phase_seconds += std::chrono::duration<double>(t1 - t0).count();
+            stats.narrow_phase_seconds += std::chrono::duration<double>(t2 - t1).count();
+        }
+        m_candidates = {};
+        stats.candidate_pairs = m_triangle_pairs.load();
+        return true;
+    }
+
+    tbb::enumerable_thread_specific<std::vector<CcdPair>>& hits() { return m_hits; }
+
+  private:
+    // The candidate primitive pairs of jobs [first_job, first_job + count), one list per job.
+    void collect(std::size_t first_job, std::size_t count) {
+        tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
+            m_candidates[j].clear();
+            if (m_stopper.should_stop()) {
+                return;
+            }
+            Traversal trav{m_objects, m_gap, m_candidates[j]};
+            trav.run(m_jobs[first_job + j]);
+            m_triangle_pairs.fetch_add(trav.triangle_pairs, std::memory_order_relaxed);
+        });
+    }
+
+    // The elementary tests of the candidates of the batch's first `count` jobs.
+    void test(std::size_t count) {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, m_offsets[count], 64), [&](const auto& range) {
+                if (m_stopper.should_stop()) {
+                    return;
+                }
+                auto& local = m_hits.local();
+                auto job = static_cast<std::size_t>(std::upper_bound(m_offsets.begin(),
+                                                                     m_offsets.begin() + count + 1,
+                                                                     range.begin()) -
+                                                    m_offsets.begin() - 1);
+                for (auto i = range.begin(); i < range.end(); ++i) {
+                    // Before every test, not once per range: a degenerate test (coplanar faces
+                    // sweeping through each other) uses its whole work bound, ~2.5 ms in release,
+                    // and 64 of them overran a frame's deadline by 0.16 s (by seconds under ASan;
+                    // fuzz_frames). The check costs ~20 ns against a test's >= 100 ns.
+                    if (m_stopper.should_stop()) {
+                        return;
+                    }
+                    while (i >= m_offsets[job + 1]) {
+                        ++job;
+                    }
+                    const auto& c = m_candidates[job][i - m_offsets[job]];
+                    const auto r =
+                        elementary(c.kind, points_of(m_objects, c), m_request.elementary);
+                    if (r.hit) {
+                        local.push_back({c.kind, c.object, c.primitive, c.other, c.other_primitive,
+                                         r.toi, r.capped});
+                    }
+                }
+            });
+    }
+
+    const std::vector<ObjectData>& m_objects;
+    double m_gap;
+    const std::vector<Job>& m_jobs;
+    const CcdRequest& m_request;
+    Stopper& m_stopper;
+    std::size_t m_batch;
+    tbb::enumerable_thread_specific<std::vector<CcdPair>> m_hits;
+    std::vector<std::vector<Candidate>> m_candidates;
+    std::vector<std::size_t> m_offsets;
+    std::atomic<std::uint64_t> m_triangle_pairs{0};
+};
+
+// Results: sorted pairs, per object pair and overall earliest.
+void merge_results(tbb::enumerable_thread_specific<std::vector<CcdPair>>& hits, CcdResult& result) {
+    for (auto& local : hits) {
+        result.pairs.insert(result.pairs.end(), local.begin(), local.end());
+    }
+    std::sort(result.pairs.begin(), result.pairs.end(), [](const CcdPair& x, const CcdPair& y) {
+        return std::tie(x.kind, x.object, x.primitive, x.other, x.other_primitive) <
+               std::tie(y.kind, y.object, y.primitive, y.other, y.other_primitive);
+    });
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> first;
+    for (std::size_t i = 0; i < result.pairs.size(); ++i) {
+        const auto& p = result.pairs[i];
+        result.stats.capped_tests += p.capped ? 1 : 0;
+        const std::pair key{std::min(p.object, p.other), std::max(p.object, p.other)};
+        auto [it, inserted] = first.emplace(key, i);
+        if (!inserted && p.toi < result.pairs[it->second].toi) {
+            it->second = i;
+        }
+        if (!result.earliest || p.toi < result.pairs[*result.earliest].toi) {
+            result.earliest = i;
+        }
+    }
+    for (const auto& [key, i] : first) {
+        result.object_pairs.push_back({key.first, key.second, result.pairs[i].toi, i});
+    }
+}
+
 }  // namespace
 
 std::vector<std::array<std::uint32_t, 2>> mesh_edges(const MeshTopology& topology) {
@@ -535,180 +767,28 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
     if (Status s = validate(scene, positions_t1, request); !s.ok()) {
         return s;
     }
-    std::atomic<bool> stopped{false};
-    auto should_stop = [&] {
-        if (stopped.load(std::memory_order_relaxed)) {
-            return true;
-        }
-        if (cancel != nullptr && cancel->should_stop()) {
-            stopped.store(true, std::memory_order_relaxed);
-            return true;
-        }
-        return false;
-    };
-    auto stop_status = [&]() -> Status {
-        if (cancel != nullptr && cancel->cancelled()) {
-            return {StatusCode::cancelled, "ccd cancelled by the caller"};
-        }
-        return {StatusCode::deadline_exceeded, "ccd stopped: deadline exceeded"};
-    };
-    if (should_stop()) {
-        return stop_status();
+    Stopper stopper(cancel);
+    if (stopper.should_stop()) {
+        return stopper.status();
     }
 
     CcdResult result;
-    const auto n = static_cast<std::uint32_t>(scene.size());
-
-    // Broad phase, part 1: per-object swept boxes and hierarchies.
-    std::vector<ObjectData> objects(n);
-    double scale = 0.0;
-    for (std::uint32_t i = 0; i < n; ++i) {
-        objects[i].object = &scene[i];
-        objects[i].p1 = &positions_t1[i];
-        for (const auto& p : scene[i].vertices) {
-            scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
-        }
-        for (const auto& p : positions_t1[i]) {
-            scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
-        }
-    }
+    std::vector<ObjectData> objects(scene.size());
+    const double scale = prepare_objects(scene, positions_t1, objects);
     const double gap = request.elementary.min_distance * (1.0 + 1e-9) + 1e-12 * scale;
-    tbb::parallel_for(std::uint32_t{0}, n, [&](std::uint32_t i) { prepare(objects[i]); });
+    tbb::parallel_for(std::uint32_t{0}, static_cast<std::uint32_t>(scene.size()),
+                      [&](std::uint32_t i) { prepare(objects[i]); });
+    const std::vector<Job> jobs = broad_phase_jobs(objects, gap, request, result.stats);
 
-    // Broad phase, part 2: object pairs whose swept boxes meet (sort and sweep along x), then
-    // jobs over node pairs.
-    std::vector<Job> roots;
-    if (request.self) {
-        for (std::uint32_t i = 0; i < n; ++i) {
-            roots.push_back({i, 0, i, 0});
-        }
-    }
-    if (request.between_objects) {
-        std::vector<std::uint32_t> by_x(n);
-        std::iota(by_x.begin(), by_x.end(), 0u);
-        std::sort(by_x.begin(), by_x.end(), [&](std::uint32_t a, std::uint32_t b) {
-            return std::tie(objects[a].box.lo.x, a) < std::tie(objects[b].box.lo.x, b);
-        });
-        std::vector<std::pair<std::uint32_t, std::uint32_t>> object_pairs;
-        for (std::uint32_t k = 0; k < n; ++k) {
-            const auto& bi = objects[by_x[k]].box;
-            for (auto l = k + 1; l < n; ++l) {
-                const auto& bj = objects[by_x[l]].box;
-                if (bj.lo.x - gap > bi.hi.x) {
-                    break;  // sorted by lo.x: every later box starts further right
-                }
-                if (near(bi, bj, gap)) {
-                    object_pairs.emplace_back(std::min(by_x[k], by_x[l]),
-                                              std::max(by_x[k], by_x[l]));
-                }
-            }
-        }
-        std::sort(object_pairs.begin(), object_pairs.end());
-        result.stats.object_pairs_tested = object_pairs.size();
-        for (const auto& [a, b] : object_pairs) {
-            roots.push_back({a, 0, b, 0});
-        }
-    }
-    std::vector<Job> jobs;
-    for (const auto& r : roots) {
-        split_job(objects, gap, r, jobs);
-    }
-
-    // Broad phase, part 3, and narrow phase, in batches of jobs so that the candidate lists stay
-    // small (tens of MB, not one list of every candidate of the frame): each batch collects the
-    // candidate primitive pairs of its jobs in parallel, then runs their elementary tests in
-    // parallel.
     result.stats.brute_force_tests = brute_force_count(objects, request);
     result.stats.broad_phase_seconds = seconds_since(start);
-    const std::size_t batch = std::max<std::size_t>(
-        32, 8 * static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()));
-    tbb::enumerable_thread_specific<std::vector<CcdPair>> hits;
-    std::vector<std::vector<Candidate>> candidates(batch);
-    std::vector<std::size_t> offsets(batch + 1, 0);
-    std::atomic<std::uint64_t> triangle_pairs{0};
-    for (std::size_t first_job = 0; first_job < jobs.size(); first_job += batch) {
-        const auto t0 = Clock::now();
-        const auto count = std::min(batch, jobs.size() - first_job);
-        tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
-            candidates[j].clear();
-            if (should_stop()) {
-                return;
-            }
-            Traversal trav{objects, gap, candidates[j]};
-            trav.run(jobs[first_job + j]);
-            triangle_pairs.fetch_add(trav.triangle_pairs, std::memory_order_relaxed);
-        });
-        if (should_stop()) {
-            return stop_status();
-        }
-        for (std::size_t j = 0; j < count; ++j) {
-            offsets[j + 1] = offsets[j] + candidates[j].size();
-        }
-        result.stats.elementary_tests += offsets[count];
-        const auto t1 = Clock::now();
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, offsets[count], 64), [&](const auto& range) {
-                if (should_stop()) {
-                    return;
-                }
-                auto& local = hits.local();
-                auto job = static_cast<std::size_t>(
-                    std::upper_bound(offsets.begin(), offsets.begin() + count + 1, range.begin()) -
-                    offsets.begin() - 1);
-                for (auto i = range.begin(); i < range.end(); ++i) {
-                    // Before every test, not once per range: a degenerate test (coplanar faces
-                    // sweeping through each other) uses its whole work bound, ~2.5 ms in release,
-                    // and 64 of them overran a frame's deadline by 0.16 s (by seconds under ASan;
-                    // fuzz_frames). The check costs ~20 ns against a test's >= 100 ns.
-                    if (should_stop()) {
-                        return;
-                    }
-                    while (i >= offsets[job + 1]) {
-                        ++job;
-                    }
-                    const auto& c = candidates[job][i - offsets[job]];
-                    const auto r = elementary(c.kind, points_of(objects, c), request.elementary);
-                    if (r.hit) {
-                        local.push_back({c.kind, c.object, c.primitive, c.other, c.other_primitive,
-                                         r.toi, r.capped});
-                    }
-                }
-            });
-        if (should_stop()) {
-            return stop_status();
-        }
-        const auto t2 = Clock::now();
-        result.stats.broad_phase_seconds += std::chrono::duration<double>(t1 - t0).count();
-        result.stats.narrow_phase_seconds += std::chrono::duration<double>(t2 - t1).count();
+    BatchRunner runner(objects, gap, jobs, request, stopper);
+    if (!runner.run(result.stats)) {
+        return stopper.status();
     }
-    candidates = {};
-    result.stats.candidate_pairs = triangle_pairs.load();
 
-    // Results: sorted pairs, per object pair and overall earliest.
     const auto merge_start = Clock::now();
-    for (auto& local : hits) {
-        result.pairs.insert(result.pairs.end(), local.begin(), local.end());
-    }
-    std::sort(result.pairs.begin(), result.pairs.end(), [](const CcdPair& x, const CcdPair& y) {
-        return std::tie(x.kind, x.object, x.primitive, x.other, x.other_primitive) <
-               std::tie(y.kind, y.object, y.primitive, y.other, y.other_primitive);
-    });
-    std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> first;
-    for (std::size_t i = 0; i < result.pairs.size(); ++i) {
-        const auto& p = result.pairs[i];
-        result.stats.capped_tests += p.capped ? 1 : 0;
-        const std::pair key{std::min(p.object, p.other), std::max(p.object, p.other)};
-        auto [it, inserted] = first.emplace(key, i);
-        if (!inserted && p.toi < result.pairs[it->second].toi) {
-            it->second = i;
-        }
-        if (!result.earliest || p.toi < result.pairs[*result.earliest].toi) {
-            result.earliest = i;
-        }
-    }
-    for (const auto& [key, i] : first) {
-        result.object_pairs.push_back({key.first, key.second, result.pairs[i].toi, i});
-    }
+    merge_results(runner.hits(), result);
     result.stats.narrow_phase_seconds += seconds_since(merge_start);
     result.stats.total_seconds = seconds_since(start);
     return result;

@@ -223,35 +223,50 @@ AvatarHit to_hit(std::uint32_t object, const PairHit& h) {
 
 }  // namespace
 
-StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQueryOptions& options,
-                                            const CancelToken* cancel) {
-    if (!pose.finite()) {
-        return invalid_argument("avatar pose has a non-finite entry");
-    }
-    if (!std::isfinite(options.tolerance) || options.tolerance < 0.0) {
-        return invalid_argument("tolerance must be a finite distance >= 0");
-    }
-    if (std::isnan(options.nearest_max_distance) || options.nearest_max_distance < 0.0) {
-        return invalid_argument("nearest_max_distance must be >= 0 (or infinite)");
-    }
-    const auto t0 = std::chrono::steady_clock::now();
+// One query's shared state and its steps: 1. the objects within the tolerance, 2. the nearest
+// object, 3. prefetch along the velocity.
+struct AvatarTracker::Query {
+    AvatarTracker& tracker;
+    const AvatarQueryOptions& options;
+    const CancelToken* cancel;
+    const Aabb& box;
+    TreeRef avatar;
+    std::shared_ptr<const ModelView::Snapshot> snap;
+    const std::shared_ptr<const Store>& store;
+    GeometryCache& cache;
+    const std::vector<PieceInfo>& pieces;
+    double slack = 0.0;
+    double tol_sq = 0.0;
     AvatarResult result;
-    m_posed.resize(m_mesh.vertices.size());
-    for (std::size_t v = 0; v < m_posed.size(); ++v) {
-        m_posed[v] = pose.apply(m_mesh.vertices[v]);
-    }
-    const Aabb box = compute_box(m_posed);
-    const TreeRef avatar{m_tree.get(), nullptr, &pose, m_posed.data()};
-    const auto snap = m_view->snapshot();
-    const auto& store = m_view->store();
-    auto& cache = *m_view->cache();
-    const auto& pieces = store->pieces();
-    const double slack = std::max(m_view->slack(), rounding_slack(coordinate_scale(box)));
-    const double tol_sq = options.tolerance * options.tolerance;
 
-    // Tests one candidate (a stored piece, or an overlay object when piece == UINT32_MAX).
-    auto test = [&](std::uint32_t piece, const ResidentPiece* overlay, double bound_sq,
-                    bool ties_avatar_first, std::uint32_t& object) -> StatusOr<PairHit> {
+    // The nearest search's state.
+    bool have = false;
+    double best_sq = std::numeric_limits<double>::infinity();
+    AvatarHit nearest;
+    Seed next_seed;
+    double seed_sq = std::numeric_limits<double>::infinity();
+    double max_sq = 0.0;
+    std::uint32_t current_piece = 0;
+
+    Query(AvatarTracker& t, const Affine& pose, const AvatarQueryOptions& o, const CancelToken* c,
+          const Aabb& b)
+        : tracker(t),
+          options(o),
+          cancel(c),
+          box(b),
+          avatar{t.m_tree.get(), nullptr, &pose, t.m_posed.data()},
+          snap(t.m_view->snapshot()),
+          store(t.m_view->store()),
+          cache(*t.m_view->cache()),
+          pieces(store->pieces()),
+          slack(std::max(t.m_view->slack(), rounding_slack(coordinate_scale(b)))),
+          tol_sq(o.tolerance * o.tolerance) {}
+
+    bool stopped() const { return cancel != nullptr && cancel->should_stop(); }
+
+    // Tests one candidate (a stored piece, or an overlay object when `overlay` is given).
+    StatusOr<PairHit> test(std::uint32_t piece, const ResidentPiece* overlay, double bound_sq,
+                           bool ties_avatar_first, std::uint32_t& object) {
         PieceHandle handle;
         const ResidentPiece* p = overlay;
         if (p == nullptr) {
@@ -269,134 +284,173 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
                                    slack, ties_avatar_first);
         result.exact_tests += hit.exact_tests;
         return hit;
-    };
-    auto stopped = [&] { return cancel != nullptr && cancel->should_stop(); };
+    }
 
     // 1. Objects within the tolerance (collisions: distance 0).
-    std::vector<std::uint32_t> cands;
-    m_view->index().within(box, options.tolerance, slack, cands);
-    result.candidate_pieces = cands.size();
-    std::vector<AvatarHit> best;  // per object, squared distance in `distance` until the end
-    auto merge = [&](std::uint32_t object, const PairHit& h) {
-        auto it = std::find_if(best.begin(), best.end(),
-                               [&](const AvatarHit& b) { return b.object == object; });
-        if (it == best.end()) {
-            best.push_back(to_hit(object, h));
-        } else if (tolerance_better(h, *it)) {
-            *it = to_hit(object, h);
+    Status within_tolerance() {
+        std::vector<std::uint32_t> cands;
+        tracker.m_view->index().within(box, options.tolerance, slack, cands);
+        result.candidate_pieces = cands.size();
+        std::vector<AvatarHit> best;  // per object, squared distance in `distance` until the end
+        auto merge = [&](std::uint32_t object, const PairHit& h) {
+            auto it = std::find_if(best.begin(), best.end(),
+                                   [&](const AvatarHit& b) { return b.object == object; });
+            if (it == best.end()) {
+                best.push_back(to_hit(object, h));
+            } else if (tolerance_better(h, *it)) {
+                *it = to_hit(object, h);
+            }
+        };
+        for (auto p : cands) {
+            if (snap->masked[pieces[p].object] != 0) {
+                continue;
+            }
+            if (stopped()) {
+                return Status{StatusCode::cancelled, "avatar query cancelled"};
+            }
+            std::uint32_t object = 0;
+            auto hit = test(p, nullptr, tol_sq, false, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            if (hit->found) {
+                merge(object, *hit);
+            }
         }
-    };
-    for (auto p : cands) {
-        if (snap->masked[pieces[p].object] != 0) {
-            continue;
+        for (const auto& o : snap->overlay) {
+            if (box_squared_distance(o.box, box) > cull_threshold_sq(tol_sq, slack)) {
+                continue;
+            }
+            std::uint32_t object = 0;
+            auto hit = test(0, o.piece.get(), tol_sq, false, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            if (hit->found) {
+                merge(object, *hit);
+            }
         }
-        if (stopped()) {
-            return Status{StatusCode::cancelled, "avatar query cancelled"};
+        std::sort(best.begin(), best.end(),
+                  [](const AvatarHit& a, const AvatarHit& b) { return a.object < b.object; });
+        for (auto& h : best) {
+            h.distance = std::sqrt(h.distance);
+            if (h.distance == 0.0) {
+                result.collisions.push_back(h);
+            }
         }
-        std::uint32_t object = 0;
-        auto hit = test(p, nullptr, tol_sq, false, object);
-        if (!hit.ok()) {
-            return hit.status();
-        }
-        if (hit->found) {
-            merge(object, *hit);
-        }
+        result.within = std::move(best);
+        return {};
     }
-    for (const auto& o : snap->overlay) {
-        if (box_squared_distance(o.box, box) > cull_threshold_sq(tol_sq, slack)) {
-            continue;
-        }
-        std::uint32_t object = 0;
-        auto hit = test(0, o.piece.get(), tol_sq, false, object);
-        if (!hit.ok()) {
-            return hit.status();
-        }
-        if (hit->found) {
-            merge(object, *hit);
-        }
-    }
-    std::sort(best.begin(), best.end(),
-              [](const AvatarHit& a, const AvatarHit& b) { return a.object < b.object; });
-    for (auto& h : best) {
-        h.distance = std::sqrt(h.distance);
-        if (h.distance == 0.0) {
-            result.collisions.push_back(h);
-        }
-    }
-    result.within = std::move(best);
 
-    // 2. The nearest object: candidates in growing radii around the avatar's box, starting from
-    // the previous pose's distance plus how far the box moved (temporal coherence).
-    if (options.nearest && (!pieces.empty() || !snap->overlay.empty())) {
+    // The first search radius: the previous pose's distance plus how far the box moved (temporal
+    // coherence), at least the tolerance results' distances.
+    double start_radius() const {
         double radius = std::min(options.tolerance, options.nearest_max_distance);
-        if (m_has_previous) {
-            const Vec3 dlo = box.lo - m_previous_box.lo;
-            const Vec3 dhi = box.hi - m_previous_box.hi;
+        if (tracker.m_has_previous) {
+            const Vec3 dlo = box.lo - tracker.m_previous_box.lo;
+            const Vec3 dhi = box.hi - tracker.m_previous_box.hi;
             const double moved = std::sqrt(std::max(squared_norm(dlo), squared_norm(dhi)));
-            radius = std::max(radius, m_previous_nearest + moved);
+            radius = std::max(radius, tracker.m_previous_nearest + moved);
         }
         for (const auto& h : result.within) {
             radius = std::max(radius, h.distance);
         }
-        radius =
-            std::min(std::max(radius, 1e-3 * norm(box.extent())), options.nearest_max_distance);
-        bool have = false;
-        double best_sq = std::numeric_limits<double>::infinity();
-        AvatarHit nearest;
-        Seed next_seed;
-        std::unordered_set<std::uint32_t> tested;
-        // The previous closest pair at this pose: an upper bound (never a result by itself: the
-        // search below finds it again, or something closer or tied-and-smaller).
-        double seed_sq = std::numeric_limits<double>::infinity();
-        if (m_seed.valid) {
-            PieceHandle handle;
-            const ResidentPiece* p = nullptr;
-            if (m_seed.piece != UINT32_MAX) {
-                if (snap->masked[pieces[m_seed.piece].object] == 0) {
-                    auto h = cache.get(store, m_seed.piece);
-                    if (h.ok()) {
-                        handle = *h;
-                        p = handle.get();
-                    }
-                }
-            } else {
-                for (const auto& o : snap->overlay) {
-                    if (o.object == m_seed.object) {
-                        p = o.piece.get();
-                    }
+        return std::min(std::max(radius, 1e-3 * norm(box.extent())), options.nearest_max_distance);
+    }
+
+    // The previous closest pair at this pose: an upper bound (never a result by itself: the
+    // search finds it again, or something closer or tied-and-smaller). Sets seed_sq and widens
+    // `radius` to it.
+    void seed_bound(double& radius) {
+        const Seed& seed = tracker.m_seed;
+        if (!seed.valid) {
+            return;
+        }
+        PieceHandle handle;
+        const ResidentPiece* p = nullptr;
+        if (seed.piece != UINT32_MAX) {
+            if (snap->masked[pieces[seed.piece].object] == 0) {
+                auto h = cache.get(store, seed.piece);
+                if (h.ok()) {
+                    handle = *h;
+                    p = handle.get();
                 }
             }
-            if (p != nullptr && m_seed.local < p->geometry.triangles.size()) {
-                const auto& t = m_mesh.triangles[m_seed.avatar];
-                const Triangle y{m_posed[t[0]], m_posed[t[1]], m_posed[t[2]]};
-                seed_sq = triangle_triangle(p->bvh.corners(m_seed.local), y).squared_distance;
-                radius =
-                    std::min(std::max(radius, std::sqrt(seed_sq)), options.nearest_max_distance);
+        } else {
+            for (const auto& o : snap->overlay) {
+                if (o.object == seed.object) {
+                    p = o.piece.get();
+                }
             }
         }
+        if (p != nullptr && seed.local < p->geometry.triangles.size()) {
+            const auto& t = tracker.m_mesh.triangles[seed.avatar];
+            const auto& posed = tracker.m_posed;
+            const Triangle y{posed[t[0]], posed[t[1]], posed[t[2]]};
+            seed_sq = triangle_triangle(p->bvh.corners(seed.local), y).squared_distance;
+            radius = std::min(std::max(radius, std::sqrt(seed_sq)), options.nearest_max_distance);
+        }
+    }
+
+    double bound_now() const {
+        const double b = have ? best_sq : seed_sq;
+        return std::min(std::isfinite(b) ? std::nextafter(b, INFINITY) : b, max_sq);
+    }
+
+    void consider(std::uint32_t object, const PairHit& h) {
+        if (!h.found) {
+            return;
+        }
+        bool better = !have || h.squared_distance < best_sq;
+        if (have && h.squared_distance == best_sq) {
+            better = std::tie(object, h.triangle_b, h.triangle_a) <
+                     std::tie(nearest.object, nearest.avatar_triangle, nearest.object_triangle);
+        }
+        if (better) {
+            have = true;
+            best_sq = h.squared_distance;
+            nearest = to_hit(object, h);
+            next_seed = {true, current_piece, object, h.local_a, h.local_b};
+        }
+    }
+
+    // The untested pieces within `radius`, nearest box first, until one is farther than the best.
+    Status search_within(double radius, std::unordered_set<std::uint32_t>& tested) {
+        std::vector<std::uint32_t> near;
+        tracker.m_view->index().within(box, radius, slack, near);
+        std::vector<std::pair<double, std::uint32_t>> order;
+        for (auto p : near) {
+            if (tested.insert(p).second && snap->masked[pieces[p].object] == 0) {
+                order.emplace_back(box_squared_distance(pieces[p].box, box), p);
+            }
+        }
+        std::sort(order.begin(), order.end());
+        for (const auto& [box_sq, p] : order) {
+            if (box_sq > cull_threshold_sq(have ? best_sq : seed_sq, slack)) {
+                break;
+            }
+            if (stopped()) {
+                return Status{StatusCode::cancelled, "avatar query cancelled"};
+            }
+            std::uint32_t object = 0;
+            auto hit = test(p, nullptr, bound_now(), true, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            current_piece = p;
+            consider(object, *hit);
+        }
+        return {};
+    }
+
+    // 2. The nearest object: the overlay objects, then candidates in growing radii around the
+    // avatar's box.
+    Status nearest_object() {
+        double radius = start_radius();
+        std::unordered_set<std::uint32_t> tested;
+        seed_bound(radius);
         const double max_d = options.nearest_max_distance;
-        const double max_sq = max_d * max_d;
-        auto bound_now = [&] {
-            const double b = have ? best_sq : seed_sq;
-            return std::min(std::isfinite(b) ? std::nextafter(b, INFINITY) : b, max_sq);
-        };
-        std::uint32_t current_piece = 0;
-        auto consider = [&](std::uint32_t object, const PairHit& h) {
-            if (!h.found) {
-                return;
-            }
-            bool better = !have || h.squared_distance < best_sq;
-            if (have && h.squared_distance == best_sq) {
-                better = std::tie(object, h.triangle_b, h.triangle_a) <
-                         std::tie(nearest.object, nearest.avatar_triangle, nearest.object_triangle);
-            }
-            if (better) {
-                have = true;
-                best_sq = h.squared_distance;
-                nearest = to_hit(object, h);
-                next_seed = {true, current_piece, object, h.local_a, h.local_b};
-            }
-        };
+        max_sq = max_d * max_d;
         for (const auto& o : snap->overlay) {
             std::uint32_t object = 0;
             auto hit = test(0, o.piece.get(), bound_now(), true, object);
@@ -407,29 +461,8 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             consider(object, *hit);
         }
         for (int round = 0;; ++round) {
-            std::vector<std::uint32_t> near;
-            m_view->index().within(box, radius, slack, near);
-            std::vector<std::pair<double, std::uint32_t>> order;
-            for (auto p : near) {
-                if (tested.insert(p).second && snap->masked[pieces[p].object] == 0) {
-                    order.emplace_back(box_squared_distance(pieces[p].box, box), p);
-                }
-            }
-            std::sort(order.begin(), order.end());
-            for (const auto& [box_sq, p] : order) {
-                if (box_sq > cull_threshold_sq(have ? best_sq : seed_sq, slack)) {
-                    break;
-                }
-                if (stopped()) {
-                    return Status{StatusCode::cancelled, "avatar query cancelled"};
-                }
-                std::uint32_t object = 0;
-                auto hit = test(p, nullptr, bound_now(), true, object);
-                if (!hit.ok()) {
-                    return hit.status();
-                }
-                current_piece = p;
-                consider(object, *hit);
+            if (Status s = search_within(radius, tested); !s.ok()) {
+                return s;
             }
             // Done when the best lies within the searched radius (every piece outside it is
             // farther), or when every piece has been searched.
@@ -443,14 +476,15 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         if (have) {
             nearest.distance = std::sqrt(best_sq);
             result.nearest = nearest;
-            m_previous_nearest = nearest.distance;
+            tracker.m_previous_nearest = nearest.distance;
         }
-        m_seed = next_seed;
+        tracker.m_seed = next_seed;
+        return {};
     }
 
     // 3. Prefetch along the velocity: the box swept over the next poses.
-    if (m_has_previous && options.prefetch_poses > 0.0) {
-        const Vec3 velocity = box.center() - m_previous_box.center();
+    void prefetch() {
+        const Vec3 velocity = box.center() - tracker.m_previous_box.center();
         Aabb ahead = box;
         ahead.extend(Aabb{box.lo + velocity * options.prefetch_poses,
                           box.hi + velocity * options.prefetch_poses});
@@ -460,7 +494,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         const double reach =
             std::max({options.tolerance, result.nearest ? result.nearest->distance : 0.0,
                       0.5 * norm(box.extent())});
-        m_view->index().within(ahead, reach, slack, near);
+        tracker.m_view->index().within(ahead, reach, slack, near);
         std::vector<std::uint32_t> hints;
         for (auto p : near) {
             if (snap->masked[pieces[p].object] == 0 && !cache.resident(*store, p)) {
@@ -468,12 +502,43 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             }
         }
         result.prefetch_hints = hints.size();
-        cache.prefetch(store, std::move(hints), m_id + 1);
+        cache.prefetch(store, std::move(hints), tracker.m_id + 1);
+    }
+};
+
+StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQueryOptions& options,
+                                            const CancelToken* cancel) {
+    if (!pose.finite()) {
+        return invalid_argument("avatar pose has a non-finite entry");
+    }
+    if (!std::isfinite(options.tolerance) || options.tolerance < 0.0) {
+        return invalid_argument("tolerance must be a finite distance >= 0");
+    }
+    if (std::isnan(options.nearest_max_distance) || options.nearest_max_distance < 0.0) {
+        return invalid_argument("nearest_max_distance must be >= 0 (or infinite)");
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    m_posed.resize(m_mesh.vertices.size());
+    for (std::size_t v = 0; v < m_posed.size(); ++v) {
+        m_posed[v] = pose.apply(m_mesh.vertices[v]);
+    }
+    const Aabb box = compute_box(m_posed);
+    Query q(*this, pose, options, cancel, box);
+    if (Status s = q.within_tolerance(); !s.ok()) {
+        return s;
+    }
+    if (options.nearest && (!q.pieces.empty() || !q.snap->overlay.empty())) {
+        if (Status s = q.nearest_object(); !s.ok()) {
+            return s;
+        }
+    }
+    if (m_has_previous && options.prefetch_poses > 0.0) {
+        q.prefetch();
     }
     m_has_previous = true;
     m_previous_box = box;
-    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    return result;
+    q.result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return std::move(q.result);
 }
 
 }  // namespace proxima::massive

@@ -710,137 +710,155 @@ std::string object_name(std::uint32_t bay, const std::string& what) {
     return buf.data() + what;
 }
 
-// One bay: a frame, one or two tanks, pipe runs on every level but the top, walkways on the top
-// level and, often, stairs to the first level. Absolute coordinates (the bay's cell at x0, y0);
-// every contact that should be exact is between values computed by the same expression.
-std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x0, double y0) {
-    Rng rng(mix64(seed ^ mix64(bay)));
+// The planning of one bay, step by step; the steps draw from one generator, in this order: the
+// layout, the tanks, the pipe runs, the walkways, the stairs.
+struct BayPlanner {
+    BayPlanner(std::uint64_t seed, std::uint32_t bay_index, double x, double y)
+        : rng(mix64(seed ^ mix64(bay_index))), bay(bay_index), x0(x), y0(y) {}
+
+    Rng rng;
+    std::uint32_t bay;
+    double x0;
+    double y0;
     Frame f;
-    f.x0 = x0;
-    f.y0 = y0;
-    f.w = rng.pick(std::array{9.0, 12.0, 15.0});
-    f.d = rng.pick(std::array{8.0, 9.0, 10.0});
-    const int levels = 2 + static_cast<int>(rng.index(2));
-    const double level_height = rng.grid(4.0, 5.0, 0.25);
-    for (int l = 0; l < levels; ++l) {
-        f.levels.push_back(level_height * (l + 1));
-    }
-    const double top = f.levels.back();
-    const double w = f.w;
-    const double d = f.d;
-    // Columns are wider than girders (so their faces never share a vertex position with a
-    // girder end).
-    f.column_depth = rng.pick(std::array{0.3, 0.35, 0.4});
-    f.girder_width = rng.pick(std::array{0.2, 0.24, 0.28});
-    const double cd = f.column_depth;
-    const double gw = f.girder_width;
-    const double gd = rng.pick(std::array{0.3, 0.36, 0.45});
-
-    std::vector<double> columns = {0.0, w};
-    if (w >= 12.0) {
-        columns.insert(columns.begin() + 1, 0.5 * w);
-    }
+    int levels = 0;
+    double top = 0.0;
+    double gd = 0.0;  // girder depth
+    std::vector<double> columns;
     std::vector<double> secondary;
-    if (w == 9.0) {
-        secondary = {0.5 * w};
-    } else if (w == 15.0) {
-        secondary = {0.25 * w, 0.75 * w};
-    }
-    // The top level also carries deck beams at w/4 and 3w/4 (the horizontal tank's saddles).
-    std::vector<double> deck = secondary;
-    for (double x : {0.25 * w, 0.75 * w}) {
-        if (std::find(deck.begin(), deck.end(), x) == deck.end()) {
-            deck.push_back(x);
-        }
-    }
-    std::sort(deck.begin(), deck.end());
-    for (int l = 0; l < levels; ++l) {
-        std::vector<double> s;
-        s.reserve(columns.size() + std::max(deck.size(), secondary.size()));
-        for (double x : columns) {
-            s.push_back(x0 + x);
-        }
-        for (double x : (l + 1 == levels ? deck : secondary)) {
-            s.push_back(x0 + x);
-        }
-        std::sort(s.begin(), s.end());
-        f.supports.push_back(std::move(s));
-    }
-
-    std::vector<ObjectPlan> objects;
-    // --- The frame.
-    ObjectPlan frame{object_name(bay, "frame"), {}};
-    for (double c : columns) {
-        for (double y : {0.0, d}) {
-            frame.parts.push_back(
-                Beam{2, 1, 0, 0.0, top, y0 + y, x0 + c + 0.5 * cd, cd, cd, 0.02, 0.012});
-        }
-    }
-    for (int l = 0; l < levels; ++l) {
-        const double z = f.levels[static_cast<std::size_t>(l)];
-        for (double y : {0.0, d}) {
-            for (std::size_t c = 0; c + 1 < columns.size(); ++c) {
-                frame.parts.push_back(Beam{0, 1, 2, x0 + columns[c] + 0.5 * cd,
-                                           x0 + columns[c + 1] - 0.5 * cd, y0 + y, z, gw, gd, 0.016,
-                                           0.01});
-            }
-        }
-        for (double c : columns) {
-            frame.parts.push_back(
-                Beam{1, 0, 2, y0 + 0.5 * cd, y0 + d - 0.5 * cd, x0 + c, z, gw, gd, 0.016, 0.01});
-        }
-        for (double x : (l + 1 == levels ? deck : secondary)) {
-            frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * gw, y0 + d - 0.5 * gw, x0 + x, z, gw,
-                                       gd - 0.06, 0.014, 0.009});
-        }
-    }
-    objects.push_back(std::move(frame));
-
-    // --- Tanks: a vertical one beside the frame (+y) on a pad, a horizontal one on saddles on
-    // the top deck beams.
-    const bool vertical_tank = rng.chance(0.75);
-    const bool horizontal_tank = rng.chance(0.6) || !vertical_tank;
+    std::vector<double> deck;
+    // The vertical tank (the first level's last pipe may end in it).
+    bool vertical_tank = false;
     double tank_x = 0.0;
     double tank_y = 0.0;
     double tank_r = 0.0;
-    int tanks = 0;
-    if (vertical_tank) {
-        tank_r = rng.grid(1.0, 3.0, 0.25);
-        tank_x = x0 + rng.grid(0.35 * w, 0.65 * w, 0.25);
-        tank_y = y0 + d + 1.0 + tank_r;
-        const double height = rng.grid(6.0, 13.0, 0.5);
-        ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
-        const double pad = tank_r + 0.3;
-        tank.parts.push_back(
-            Box{{tank_x - pad, tank_y - pad, 0.0}, {tank_x + pad, tank_y + pad, 0.3}});
-        tank.parts.push_back(
-            Vessel{{tank_x, tank_y, 0.3}, Z_AXIS, X_AXIS, tank_r, height, false, true});
-        objects.push_back(std::move(tank));
-    }
-    if (horizontal_tank) {
-        const double r = rng.grid(0.8, std::min(2.0, 0.5 * d - 1.6), 0.1);
-        const double length = rng.grid(0.55 * w, 0.85 * w - r, 0.25);
-        const double saddle = rng.grid(0.25, 0.5, 0.05);
-        const double yc = y0 + 0.5 * d;
-        const double zc = top + saddle + r;
-        ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
-        tank.parts.push_back(
-            Vessel{{x0 + 0.5 * w - 0.5 * length, yc, zc}, X_AXIS, -Z_AXIS, r, length, true, true});
-        for (double x : {0.25 * w, 0.75 * w}) {
-            tank.parts.push_back(Box{{x0 + x - 0.08, yc - 0.7 * r, top},
-                                     {x0 + x + 0.08, yc + 0.7 * r, zc - 0.5 * r}});
+    std::vector<ObjectPlan> objects;
+
+    // The frame's size, levels and sections, the x of its columns and beams, and the beams
+    // under the pipes of every level.
+    void plan_layout() {
+        f.x0 = x0;
+        f.y0 = y0;
+        f.w = rng.pick(std::array{9.0, 12.0, 15.0});
+        f.d = rng.pick(std::array{8.0, 9.0, 10.0});
+        levels = 2 + static_cast<int>(rng.index(2));
+        const double level_height = rng.grid(4.0, 5.0, 0.25);
+        for (int l = 0; l < levels; ++l) {
+            f.levels.push_back(level_height * (l + 1));
         }
-        objects.push_back(std::move(tank));
+        top = f.levels.back();
+        const double w = f.w;
+        // Columns are wider than girders (so their faces never share a vertex position with a
+        // girder end).
+        f.column_depth = rng.pick(std::array{0.3, 0.35, 0.4});
+        f.girder_width = rng.pick(std::array{0.2, 0.24, 0.28});
+        gd = rng.pick(std::array{0.3, 0.36, 0.45});
+
+        columns = {0.0, w};
+        if (w >= 12.0) {
+            columns.insert(columns.begin() + 1, 0.5 * w);
+        }
+        if (w == 9.0) {
+            secondary = {0.5 * w};
+        } else if (w == 15.0) {
+            secondary = {0.25 * w, 0.75 * w};
+        }
+        // The top level also carries deck beams at w/4 and 3w/4 (the horizontal tank's saddles).
+        deck = secondary;
+        for (double x : {0.25 * w, 0.75 * w}) {
+            if (std::find(deck.begin(), deck.end(), x) == deck.end()) {
+                deck.push_back(x);
+            }
+        }
+        std::sort(deck.begin(), deck.end());
+        for (int l = 0; l < levels; ++l) {
+            std::vector<double> s;
+            s.reserve(columns.size() + std::max(deck.size(), secondary.size()));
+            for (double x : columns) {
+                s.push_back(x0 + x);
+            }
+            for (double x : (l + 1 == levels ? deck : secondary)) {
+                s.push_back(x0 + x);
+            }
+            std::sort(s.begin(), s.end());
+            f.supports.push_back(std::move(s));
+        }
     }
 
-    // --- Pipe runs: on each level below the top, lanes side by side a few millimetres to a few
-    // centimetres apart, a few millimetres to centimetres above the beams they cross. Risers of
-    // higher levels stand outside the horizontal extent of lower levels.
-    int pipes = 0;
-    for (int l = 0; l + 1 < levels; ++l) {
-        const double level_z = f.levels[static_cast<std::size_t>(l)];
-        const double margin = 0.5 + 1.2 * (levels - 2 - l);
-        // Lanes side by side from the -y side: (radius, y).
+    // The frame: columns, girders along x and y on every level, secondary (or deck) beams.
+    void plan_frame() {
+        const double d = f.d;
+        const double cd = f.column_depth;
+        const double gw = f.girder_width;
+        ObjectPlan frame{object_name(bay, "frame"), {}};
+        for (double c : columns) {
+            for (double y : {0.0, d}) {
+                frame.parts.push_back(
+                    Beam{2, 1, 0, 0.0, top, y0 + y, x0 + c + 0.5 * cd, cd, cd, 0.02, 0.012});
+            }
+        }
+        for (int l = 0; l < levels; ++l) {
+            const double z = f.levels[static_cast<std::size_t>(l)];
+            for (double y : {0.0, d}) {
+                for (std::size_t c = 0; c + 1 < columns.size(); ++c) {
+                    frame.parts.push_back(Beam{0, 1, 2, x0 + columns[c] + 0.5 * cd,
+                                               x0 + columns[c + 1] - 0.5 * cd, y0 + y, z, gw, gd,
+                                               0.016, 0.01});
+                }
+            }
+            for (double c : columns) {
+                frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * cd, y0 + d - 0.5 * cd, x0 + c, z, gw,
+                                           gd, 0.016, 0.01});
+            }
+            for (double x : (l + 1 == levels ? deck : secondary)) {
+                frame.parts.push_back(Beam{1, 0, 2, y0 + 0.5 * gw, y0 + d - 0.5 * gw, x0 + x, z, gw,
+                                           gd - 0.06, 0.014, 0.009});
+            }
+        }
+        objects.push_back(std::move(frame));
+    }
+
+    // Tanks: a vertical one beside the frame (+y) on a pad, a horizontal one on saddles on the
+    // top deck beams.
+    void plan_tanks() {
+        const double w = f.w;
+        const double d = f.d;
+        vertical_tank = rng.chance(0.75);
+        const bool horizontal_tank = rng.chance(0.6) || !vertical_tank;
+        int tanks = 0;
+        if (vertical_tank) {
+            tank_r = rng.grid(1.0, 3.0, 0.25);
+            tank_x = x0 + rng.grid(0.35 * w, 0.65 * w, 0.25);
+            tank_y = y0 + d + 1.0 + tank_r;
+            const double height = rng.grid(6.0, 13.0, 0.5);
+            ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
+            const double pad = tank_r + 0.3;
+            tank.parts.push_back(
+                Box{{tank_x - pad, tank_y - pad, 0.0}, {tank_x + pad, tank_y + pad, 0.3}});
+            tank.parts.push_back(
+                Vessel{{tank_x, tank_y, 0.3}, Z_AXIS, X_AXIS, tank_r, height, false, true});
+            objects.push_back(std::move(tank));
+        }
+        if (horizontal_tank) {
+            const double r = rng.grid(0.8, std::min(2.0, 0.5 * d - 1.6), 0.1);
+            const double length = rng.grid(0.55 * w, 0.85 * w - r, 0.25);
+            const double saddle = rng.grid(0.25, 0.5, 0.05);
+            const double yc = y0 + 0.5 * d;
+            const double zc = top + saddle + r;
+            ObjectPlan tank{object_name(bay, "tank-" + std::to_string(++tanks)), {}};
+            tank.parts.push_back(Vessel{
+                {x0 + 0.5 * w - 0.5 * length, yc, zc}, X_AXIS, -Z_AXIS, r, length, true, true});
+            for (double x : {0.25 * w, 0.75 * w}) {
+                tank.parts.push_back(Box{{x0 + x - 0.08, yc - 0.7 * r, top},
+                                         {x0 + x + 0.08, yc + 0.7 * r, zc - 0.5 * r}});
+            }
+            objects.push_back(std::move(tank));
+        }
+    }
+
+    // Lanes side by side from the -y side, a few millimetres to a few centimetres apart:
+    // (radius, y).
+    std::vector<std::pair<double, double>> plan_lanes() {
         const int wanted = 2 + static_cast<int>(rng.index(4));
         std::vector<std::pair<double, double>> lanes;
         for (int i = 0; i < wanted; ++i) {
@@ -848,89 +866,126 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
             const double gap = 0.004 + 0.056 * sq(rng.uniform());
             const double yl =
                 lanes.empty() ? y0 + 0.8 + r : lanes.back().second + lanes.back().first + gap + r;
-            if (yl + r > y0 + d - 1.0) {
+            if (yl + r > y0 + f.d - 1.0) {
                 break;
             }
             lanes.emplace_back(r, yl);
         }
-        for (std::size_t i = 0; i < lanes.size(); ++i) {
-            const auto [r, yl] = lanes[i];
-            const double clearance = 0.003 + 0.047 * sq(rng.uniform());
-            const double zc = level_z + clearance + r;
-            const double xs = x0 + margin + rng.uniform(0.0, 0.9);
-            const double xe = x0 + w - margin - rng.uniform(0.0, 0.9);
-            PipeRun run;
-            run.radius = r;
-            run.level = static_cast<std::size_t>(l);
+        return lanes;
+    }
+
+    // The run of lane i of level l: from grade or over the -y girder, along the lane, then into
+    // the vertical tank, over the -y girder or down to grade (or ending in the air).
+    PipeRun plan_run(int l, std::size_t i, const std::vector<std::pair<double, double>>& lanes,
+                     double margin) {
+        const double level_z = f.levels[static_cast<std::size_t>(l)];
+        const auto [r, yl] = lanes[i];
+        const double clearance = 0.003 + 0.047 * sq(rng.uniform());
+        const double zc = level_z + clearance + r;
+        const double xs = x0 + margin + rng.uniform(0.0, 0.9);
+        const double xe = x0 + f.w - margin - rng.uniform(0.0, 0.9);
+        PipeRun run;
+        run.radius = r;
+        run.level = static_cast<std::size_t>(l);
+        if (i == 0 && rng.chance(0.4)) {
+            run.points.push_back({xs, y0 - 1.5, zc});  // enters over the -y girder
+        } else {
+            run.points.push_back({xs, yl, rng.grid(0.3, 1.2, 0.1)});  // riser from grade
+        }
+        run.points.push_back({xs, yl, zc});
+        const bool last_lane = i + 1 == lanes.size();
+        const double tank_reach = tank_x - 0.5 * tank_r;
+        const double pipe_x = std::max(tank_reach, xs + 6.0 * r + 0.6);
+        if (vertical_tank && l == 0 && last_lane && pipe_x < tank_x + 0.6 * tank_r) {
+            // Into the vertical tank's shell, with a nozzle flange outside it.
+            const double dx = pipe_x - tank_x;
+            const double wall = tank_y - std::sqrt(tank_r * tank_r - dx * dx);
+            run.points.push_back({pipe_x, yl, zc});
+            run.points.push_back({pipe_x, wall + 0.1, zc});
+            run.open_end = true;
+            run.nozzle = 0.3;
+        } else {
+            run.points.push_back({xe, yl, zc});
             if (i == 0 && rng.chance(0.4)) {
-                run.points.push_back({xs, y0 - 1.5, zc});  // enters over the -y girder
-            } else {
-                run.points.push_back({xs, yl, rng.grid(0.3, 1.2, 0.1)});  // riser from grade
-            }
-            run.points.push_back({xs, yl, zc});
-            const bool last_lane = i + 1 == lanes.size();
-            const double tank_reach = tank_x - 0.5 * tank_r;
-            const double pipe_x = std::max(tank_reach, xs + 6.0 * r + 0.6);
-            if (vertical_tank && l == 0 && last_lane && pipe_x < tank_x + 0.6 * tank_r) {
-                // Into the vertical tank's shell, with a nozzle flange outside it.
-                const double dx = pipe_x - tank_x;
-                const double wall = tank_y - std::sqrt(tank_r * tank_r - dx * dx);
-                run.points.push_back({pipe_x, yl, zc});
-                run.points.push_back({pipe_x, wall + 0.1, zc});
-                run.open_end = true;
-                run.nozzle = 0.3;
-            } else {
-                run.points.push_back({xe, yl, zc});
-                if (i == 0 && rng.chance(0.4)) {
-                    run.points.push_back({xe, y0 - 1.5, zc});  // leaves over the -y girder
-                    if (rng.chance(0.5)) {
-                        run.points.push_back({xe, y0 - 1.5, rng.grid(0.3, 1.2, 0.1)});
-                    }
-                } else if (rng.chance(0.65)) {
-                    run.points.push_back({xe, yl, rng.grid(0.3, 1.2, 0.1)});
+                run.points.push_back({xe, y0 - 1.5, zc});  // leaves over the -y girder
+                if (rng.chance(0.5)) {
+                    run.points.push_back({xe, y0 - 1.5, rng.grid(0.3, 1.2, 0.1)});
                 }
+            } else if (rng.chance(0.65)) {
+                run.points.push_back({xe, yl, rng.grid(0.3, 1.2, 0.1)});
             }
-            ObjectPlan pipe{object_name(bay, "pipe-" + std::to_string(++pipes)), {}};
-            plan_pipe(run, f, pipe);
-            objects.push_back(std::move(pipe));
+        }
+        return run;
+    }
+
+    // Pipe runs: on each level below the top, lanes a few millimetres to centimetres above the
+    // beams they cross. Risers of higher levels stand outside the horizontal extent of lower
+    // levels.
+    void plan_pipes() {
+        int pipes = 0;
+        for (int l = 0; l + 1 < levels; ++l) {
+            const double margin = 0.5 + 1.2 * (levels - 2 - l);
+            const auto lanes = plan_lanes();
+            for (std::size_t i = 0; i < lanes.size(); ++i) {
+                const PipeRun run = plan_run(l, i, lanes, margin);
+                ObjectPlan pipe{object_name(bay, "pipe-" + std::to_string(++pipes)), {}};
+                plan_pipe(run, f, pipe);
+                objects.push_back(std::move(pipe));
+            }
         }
     }
 
-    // --- Walkways on the top level along one or both long sides: a grating resting on the
-    // girders and column tops, a toe board, posts and two rails on the outer edge.
-    const std::uint32_t sides = 1 + rng.index(3);  // bit 0: -y side, bit 1: +y side
-    int walkways = 0;
-    for (int side = 0; side < 2; ++side) {
-        if ((sides & (1u << side)) == 0) {
-            continue;
+    // Walkways on the top level along one or both long sides: a grating resting on the girders
+    // and column tops, a toe board, posts and two rails on the outer edge.
+    void plan_walkways() {
+        const double w = f.w;
+        const double d = f.d;
+        const double gw = f.girder_width;
+        const std::uint32_t sides = 1 + rng.index(3);  // bit 0: -y side, bit 1: +y side
+        int walkways = 0;
+        for (int side = 0; side < 2; ++side) {
+            if ((sides & (1u << side)) == 0) {
+                continue;
+            }
+            const double edge = side == 0 ? y0 - 0.5 * gw : y0 + d + 0.5 * gw;
+            const double inner = side == 0 ? y0 + 1.0 : y0 + d - 1.0;
+            const double inward = side == 0 ? 1.0 : -1.0;
+            const double deck_top = top + 0.03;
+            ObjectPlan walkway{object_name(bay, "walkway-" + std::to_string(++walkways)), {}};
+            walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, inner), top},
+                                        {x0 + w + 0.1, std::max(edge, inner), deck_top}});
+            const double board = edge + inward * 0.01;
+            walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, board), deck_top},
+                                        {x0 + w + 0.1, std::max(edge, board), deck_top + 0.1}});
+            const double post_y = edge + inward * 0.04;
+            const int posts = static_cast<int>(std::ceil((w + 0.1) / 1.8)) + 1;
+            for (int k = 0; k < posts; ++k) {
+                const double x = x0 - 0.05 + (w + 0.1) * k / (posts - 1);
+                walkway.parts.push_back(Tube{{x, post_y, deck_top},
+                                             {x, post_y, deck_top + 1.1},
+                                             X_AXIS,
+                                             0.024,
+                                             0.5,
+                                             0.0,
+                                             4});
+            }
+            for (double z : {deck_top + 0.5, deck_top + 1.07}) {
+                walkway.parts.push_back(Tube{
+                    {x0 - 0.1, post_y, z}, {x0 + w + 0.1, post_y, z}, -Z_AXIS, 0.021, 0.5, 0.0, 4});
+            }
+            objects.push_back(std::move(walkway));
         }
-        const double edge = side == 0 ? y0 - 0.5 * gw : y0 + d + 0.5 * gw;
-        const double inner = side == 0 ? y0 + 1.0 : y0 + d - 1.0;
-        const double inward = side == 0 ? 1.0 : -1.0;
-        const double deck_top = top + 0.03;
-        ObjectPlan walkway{object_name(bay, "walkway-" + std::to_string(++walkways)), {}};
-        walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, inner), top},
-                                    {x0 + w + 0.1, std::max(edge, inner), deck_top}});
-        const double board = edge + inward * 0.01;
-        walkway.parts.push_back(Box{{x0 - 0.1, std::min(edge, board), deck_top},
-                                    {x0 + w + 0.1, std::max(edge, board), deck_top + 0.1}});
-        const double post_y = edge + inward * 0.04;
-        const int posts = static_cast<int>(std::ceil((w + 0.1) / 1.8)) + 1;
-        for (int k = 0; k < posts; ++k) {
-            const double x = x0 - 0.05 + (w + 0.1) * k / (posts - 1);
-            walkway.parts.push_back(Tube{
-                {x, post_y, deck_top}, {x, post_y, deck_top + 1.1}, X_AXIS, 0.024, 0.5, 0.0, 4});
-        }
-        for (double z : {deck_top + 0.5, deck_top + 1.07}) {
-            walkway.parts.push_back(Tube{
-                {x0 - 0.1, post_y, z}, {x0 + w + 0.1, post_y, z}, -Z_AXIS, 0.021, 0.5, 0.0, 4});
-        }
-        objects.push_back(std::move(walkway));
     }
 
-    // --- Stairs up to the first level beside the +x side, their landing a few millimetres to
+    // Stairs up to the first level beside the +x side, their landing a few millimetres to
     // centimetres from the frame.
-    if (rng.chance(0.6)) {
+    void plan_stairs() {
+        if (!rng.chance(0.6)) {
+            return;
+        }
+        const double w = f.w;
+        const double d = f.d;
+        const double gw = f.girder_width;
         const double z1 = f.levels[0];
         const int steps = static_cast<int>(std::ceil(z1 / 0.19));
         const double rise = z1 / steps;
@@ -952,7 +1007,20 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
         }
         objects.push_back(std::move(stairs));
     }
-    return objects;
+};
+
+// One bay: a frame, one or two tanks, pipe runs on every level but the top, walkways on the top
+// level and, often, stairs to the first level. Absolute coordinates (the bay's cell at x0, y0);
+// every contact that should be exact is between values computed by the same expression.
+std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x0, double y0) {
+    BayPlanner planner(seed, bay, x0, y0);
+    planner.plan_layout();
+    planner.plan_frame();
+    planner.plan_tanks();
+    planner.plan_pipes();
+    planner.plan_walkways();
+    planner.plan_stairs();
+    return std::move(planner.objects);
 }
 
 Status stop_status(const CancelToken& cancel, const std::string& what) {
@@ -1234,10 +1302,8 @@ std::string shell_file_name(const std::string& object) {
     return "shell/" + name + ".off";
 }
 
-}  // namespace
-
-StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
-                                           const std::string& out_dir, const ProgressFn& progress) {
+// The mesh files under the furniture directory, sorted by their '/'-separated path.
+StatusOr<std::vector<std::filesystem::path>> list_furniture(const BuildingOptions& options) {
     namespace fs = std::filesystem;
     std::error_code ec;
     const fs::path root(options.furniture_dir);
@@ -1264,6 +1330,12 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
     if (files.empty()) {
         return not_found("building: no mesh files under '" + options.furniture_dir + "'");
     }
+    return files;
+}
+
+StatusOr<std::vector<FurnitureModel>> load_models(const std::filesystem::path& root,
+                                                  const std::vector<std::filesystem::path>& files,
+                                                  const ProgressFn& progress) {
     std::vector<FurnitureModel> models(files.size());
     for (std::size_t i = 0; i < files.size(); ++i) {
         if (progress) {
@@ -1276,11 +1348,13 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
     if (progress) {
         progress({"reading", files.size(), files.size(), "files"});
     }
+    return models;
+}
 
-    // Which instances: random models until the target is reached, never overshooting it by more
-    // than 2% (a smaller model is taken instead near the end).
-    Rng rng(mix64(options.seed ^ 0x6275696c64696e67ull));
-    const std::uint64_t target = options.triangles;
+// Which instances: random models until the target is reached, never overshooting it by more
+// than 2% (a smaller model is taken instead near the end).
+std::vector<std::uint32_t> pick_models(const std::vector<FurnitureModel>& models,
+                                       std::uint64_t target, Rng& rng) {
     const std::uint64_t slack = target / 50;
     std::vector<std::uint32_t> picks;
     std::uint64_t planned = 0;
@@ -1310,105 +1384,193 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
         picks.push_back(static_cast<std::uint32_t>(chosen));
         planned += models[static_cast<std::size_t>(chosen)].mesh.triangles.size();
     }
+    return picks;
+}
 
-    // The grid: about seven instances a room, about as many storeys as rooms along a side.
-    const double rooms_estimate = std::max(1.0, std::ceil(picks.size() / 7.0));
+double level(int storey) {
+    return STOREY * storey;
+}
+
+// The room grid of every storey: nx by ny rooms.
+struct RoomGrid {
+    int nx = 1;
+    int ny = 1;
+    int rooms_per_storey = 1;
+};
+
+// About seven instances a room, about as many storeys as rooms along a side.
+RoomGrid room_grid(std::size_t instances) {
+    const double rooms_estimate = std::max(1.0, std::ceil(instances / 7.0));
     const int storeys_estimate =
         std::max(1, static_cast<int>(std::lround(std::cbrt(rooms_estimate))));
     const int per_storey = static_cast<int>(std::ceil(rooms_estimate / storeys_estimate));
-    const int nx = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(per_storey))));
-    const int ny = (per_storey + nx - 1) / nx;
-    const int rooms_per_storey = nx * ny;
-    auto level = [](int storey) { return STOREY * storey; };
+    RoomGrid grid;
+    grid.nx = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(per_storey))));
+    grid.ny = (per_storey + grid.nx - 1) / grid.nx;
+    grid.rooms_per_storey = grid.nx * grid.ny;
+    return grid;
+}
 
-    // Placement: rooms in order (storey by storey), instances in rows along x from the room's
-    // -y wall. The first row stands against the wall (touching its face), the first instance of a
-    // row against the column face; neighbours touch or stand millimetres to decimetres apart;
-    // every instance stands on the slab (touching it).
-    std::vector<Instance> instances;
-    int room = 0;
-    int room_items = 0;
-    int room_capacity = 4 + static_cast<int>(rng.index(6));
-    double row_y = 0.0;
-    double row_depth = 0.0;
-    double cursor = 0.0;
-    bool row_empty = true;
-    auto room_box = [&](int k) {
-        const int storey = k / rooms_per_storey;
-        const int r = k % rooms_per_storey;
-        const int i = r % nx;
-        const int j = r / nx;
-        Aabb b;
-        b.lo = {ROOM_X * i + 0.5 * COLUMN, ROOM_Y * j + 0.5 * WALL, level(storey)};
-        b.hi = {ROOM_X * (i + 1) - 0.5 * COLUMN, ROOM_Y * (j + 1) - 0.5 * COLUMN,
-                level(storey + 1) - SLAB};
-        return b;
-    };
-    Aabb current = room_box(0);
-    auto start_room = [&](int k) {
-        room = k;
-        current = room_box(k);
-        room_items = 0;
-        room_capacity = 4 + static_cast<int>(rng.index(6));
-        row_y = current.lo.y;
-        row_depth = 0.0;
-        cursor = current.lo.x;
-        row_empty = true;
-    };
-    start_room(0);
-    static constexpr std::array<double, 6> GAPS = {0.0, 0.002, 0.01, 0.03, 0.1, 0.4};
-    static constexpr std::array<double, 4> AISLES = {0.005, 0.02, 0.05, 0.8};
-    for (std::uint32_t pick : picks) {
-        const FurnitureModel& model = models[pick];
-        auto q = static_cast<std::size_t>(rng.index(4));
-        const double gap = rng.pick(GAPS);
-        const double aisle = rng.pick(AISLES);
+// Placement: rooms in order (storey by storey), instances in rows along x from the room's -y
+// wall. The first row stands against the wall (touching its face), the first instance of a row
+// against the column face; neighbours touch or stand millimetres to decimetres apart; every
+// instance stands on the slab (touching it).
+class Placer {
+  public:
+    Placer(const RoomGrid& grid, Rng& rng)
+        : m_grid(grid),
+          m_rng(rng),
+          m_room_capacity(4 + static_cast<int>(rng.index(6))),
+          m_current(room_box(0)) {
+        start_room(0);
+    }
+
+    Status place(std::uint32_t pick, const FurnitureModel& model) {
+        static constexpr std::array<double, 6> GAPS = {0.0, 0.002, 0.01, 0.03, 0.1, 0.4};
+        static constexpr std::array<double, 4> AISLES = {0.005, 0.02, 0.05, 0.8};
+        auto q = static_cast<std::size_t>(m_rng.index(4));
+        const double gap = m_rng.pick(GAPS);
+        const double aisle = m_rng.pick(AISLES);
         // Find a place: this row, a new row, a new room (a model always fits an empty room).
         for (int tries = 0;; ++tries) {
-            const Aabb& b = model.box[q];
-            const Vec3 e = b.extent();
-            const double x = row_empty ? current.lo.x : cursor + gap;
-            const double y = row_y;
-            if (room_items < room_capacity && x + e.x <= current.hi.x && y + e.y <= current.hi.y) {
-                Affine a = model.linear[q];
-                a.m[3] = offset_onto(b.lo.x, x);
-                a.m[7] = offset_onto(b.lo.y, y);
-                a.m[11] = offset_onto(b.lo.z, current.lo.z);
-                const int storey = room / rooms_per_storey;
-                instances.push_back({pick, a,
-                                     "floor-" + std::to_string(storey) + "/room-" +
-                                         std::to_string(room % rooms_per_storey) + "/" +
-                                         model.stem + "-" + std::to_string(room_items + 1)});
-                cursor = b.hi.x + a.m[3];
-                row_depth = std::max(row_depth, (b.hi.y + a.m[7]) - row_y);
-                row_empty = false;
-                ++room_items;
-                break;
+            if (try_place(pick, model, q, gap)) {
+                return {};
             }
             if (tries > 8) {
                 q = (q + 1) % 4;  // a room too narrow for this orientation
             }
-            if (!row_empty && room_items < room_capacity) {
-                row_y = row_y + row_depth + aisle;
-                row_depth = 0.0;
-                row_empty = true;
-                cursor = current.lo.x;
+            if (!m_row_empty && m_room_items < m_room_capacity) {
+                m_row_y = m_row_y + m_row_depth + aisle;
+                m_row_depth = 0.0;
+                m_row_empty = true;
+                m_cursor = m_current.lo.x;
             } else {
-                start_room(room + 1);
+                start_room(m_room + 1);
             }
             if (tries > 64) {
                 return Status(StatusCode::internal, "building: cannot place '" + model.key + "'");
             }
         }
     }
-    const int storeys = room / rooms_per_storey + 1;
 
-    // The shell: a slab under every storey and a roof slab; per storey the columns at the grid
-    // points, and walls along every grid line between columns (touching them), each span with a
-    // door except on the outside (the ground floor has one entrance).
+    int storeys() const { return m_room / m_grid.rooms_per_storey + 1; }
+    std::vector<Instance>& instances() { return m_instances; }
+
+  private:
+    Aabb room_box(int k) const {
+        const int storey = k / m_grid.rooms_per_storey;
+        const int r = k % m_grid.rooms_per_storey;
+        const int i = r % m_grid.nx;
+        const int j = r / m_grid.nx;
+        Aabb b;
+        b.lo = {ROOM_X * i + 0.5 * COLUMN, ROOM_Y * j + 0.5 * WALL, level(storey)};
+        b.hi = {ROOM_X * (i + 1) - 0.5 * COLUMN, ROOM_Y * (j + 1) - 0.5 * COLUMN,
+                level(storey + 1) - SLAB};
+        return b;
+    }
+
+    void start_room(int k) {
+        m_room = k;
+        m_current = room_box(k);
+        m_room_items = 0;
+        m_room_capacity = 4 + static_cast<int>(m_rng.index(6));
+        m_row_y = m_current.lo.y;
+        m_row_depth = 0.0;
+        m_cursor = m_current.lo.x;
+        m_row_empty = true;
+    }
+
+    // Places the model in orientation q at the end of the current row when it fits there.
+    bool try_place(std::uint32_t pick, const FurnitureModel& model, std::size_t q, double gap) {
+        const Aabb& b = model.box[q];
+        const Vec3 e = b.extent();
+        const double x = m_row_empty ? m_current.lo.x : m_cursor + gap;
+        const double y = m_row_y;
+        if (!(m_room_items < m_room_capacity && x + e.x <= m_current.hi.x &&
+              y + e.y <= m_current.hi.y)) {
+            return false;
+        }
+        Affine a = model.linear[q];
+        a.m[3] = offset_onto(b.lo.x, x);
+        a.m[7] = offset_onto(b.lo.y, y);
+        a.m[11] = offset_onto(b.lo.z, m_current.lo.z);
+        const int storey = m_room / m_grid.rooms_per_storey;
+        m_instances.push_back({pick, a,
+                               "floor-" + std::to_string(storey) + "/room-" +
+                                   std::to_string(m_room % m_grid.rooms_per_storey) + "/" +
+                                   model.stem + "-" + std::to_string(m_room_items + 1)});
+        m_cursor = b.hi.x + a.m[3];
+        m_row_depth = std::max(m_row_depth, (b.hi.y + a.m[7]) - m_row_y);
+        m_row_empty = false;
+        ++m_room_items;
+        return true;
+    }
+
+    const RoomGrid& m_grid;
+    Rng& m_rng;
+    std::vector<Instance> m_instances;
+    int m_room = 0;
+    int m_room_items = 0;
+    int m_room_capacity;
+    double m_row_y = 0.0;
+    double m_row_depth = 0.0;
+    double m_cursor = 0.0;
+    bool m_row_empty = true;
+    Aabb m_current;
+};
+
+// The walls of storey s (z0 to z1): along x (axis 0) at y = ROOM_Y j, then along y (axis 1) at
+// x = ROOM_X i, touching the columns; each span with a door except on the outside (the ground
+// floor has one entrance).
+void plan_walls(const RoomGrid& grid, int s, const std::string& prefix, Rng& rng,
+                std::vector<ShellObject>& shell) {
+    const double z0 = level(s);
+    const double z1 = level(s + 1) - SLAB;
+    for (int axis = 0; axis < 2; ++axis) {
+        const int lines = axis == 0 ? grid.ny : grid.nx;
+        const int spans = axis == 0 ? grid.nx : grid.ny;
+        const double pitch = axis == 0 ? ROOM_X : ROOM_Y;
+        const double across = axis == 0 ? ROOM_Y : ROOM_X;
+        for (int line = 0; line <= lines; ++line) {
+            ShellObject wall{prefix + (axis == 0 ? "/wall-x-" : "/wall-y-") + std::to_string(line),
+                             {}};
+            const double c = across * line;
+            auto add = [&](double a0, double a1, double za, double zb) {
+                Box b;
+                b.lo[axis] = a0;
+                b.hi[axis] = a1;
+                b.lo[1 - axis] = c - 0.5 * WALL;
+                b.hi[1 - axis] = c + 0.5 * WALL;
+                b.lo.z = za;
+                b.hi.z = zb;
+                wall.boxes.push_back(b);
+            };
+            for (int span = 0; span < spans; ++span) {
+                const double a0 = pitch * span + 0.5 * COLUMN;
+                const double a1 = pitch * (span + 1) - 0.5 * COLUMN;
+                const bool outside = line == 0 || line == lines;
+                const bool door = !outside || (s == 0 && axis == 0 && line == 0 && span == 0);
+                if (!door) {
+                    add(a0, a1, z0, z1);
+                    continue;
+                }
+                const double d0 = rng.grid(a0 + 0.3, a1 - 0.3 - DOOR_WIDTH, 0.1);
+                const double d1 = d0 + DOOR_WIDTH;
+                add(a0, d0, z0, z1);
+                add(d0, d1, z0 + DOOR_HEIGHT, z1);
+                add(d1, a1, z0, z1);
+            }
+            shell.push_back(std::move(wall));
+        }
+    }
+}
+
+// The shell: a slab under every storey and a roof slab; per storey the columns at the grid
+// points, and the walls.
+std::vector<ShellObject> plan_shell(const RoomGrid& grid, int storeys, Rng& rng) {
     std::vector<ShellObject> shell;
-    const double x_max = ROOM_X * nx;
-    const double y_max = ROOM_Y * ny;
+    const double x_max = ROOM_X * grid.nx;
+    const double y_max = ROOM_Y * grid.ny;
     for (int s = 0; s <= storeys; ++s) {
         const std::string prefix =
             s == storeys ? std::string("roof") : "floor-" + std::to_string(s);
@@ -1421,8 +1583,8 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
         const double z0 = level(s);
         const double z1 = level(s + 1) - SLAB;
         ShellObject columns{prefix + "/columns", {}};
-        for (int i = 0; i <= nx; ++i) {
-            for (int j = 0; j <= ny; ++j) {
+        for (int i = 0; i <= grid.nx; ++i) {
+            for (int j = 0; j <= grid.ny; ++j) {
                 const double x = ROOM_X * i;
                 const double y = ROOM_Y * j;
                 columns.boxes.push_back(Box{{x - 0.5 * COLUMN, y - 0.5 * COLUMN, z0},
@@ -1430,47 +1592,117 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
             }
         }
         shell.push_back(std::move(columns));
-        // Along x (axis 0) at y = ROOM_Y j, then along y (axis 1) at x = ROOM_X i.
-        for (int axis = 0; axis < 2; ++axis) {
-            const int lines = axis == 0 ? ny : nx;
-            const int spans = axis == 0 ? nx : ny;
-            const double pitch = axis == 0 ? ROOM_X : ROOM_Y;
-            const double across = axis == 0 ? ROOM_Y : ROOM_X;
-            for (int line = 0; line <= lines; ++line) {
-                ShellObject wall{
-                    prefix + (axis == 0 ? "/wall-x-" : "/wall-y-") + std::to_string(line), {}};
-                const double c = across * line;
-                auto add = [&](double a0, double a1, double za, double zb) {
-                    Box b;
-                    b.lo[axis] = a0;
-                    b.hi[axis] = a1;
-                    b.lo[1 - axis] = c - 0.5 * WALL;
-                    b.hi[1 - axis] = c + 0.5 * WALL;
-                    b.lo.z = za;
-                    b.hi.z = zb;
-                    wall.boxes.push_back(b);
-                };
-                for (int span = 0; span < spans; ++span) {
-                    const double a0 = pitch * span + 0.5 * COLUMN;
-                    const double a1 = pitch * (span + 1) - 0.5 * COLUMN;
-                    const bool outside = line == 0 || line == lines;
-                    const bool door = !outside || (s == 0 && axis == 0 && line == 0 && span == 0);
-                    if (!door) {
-                        add(a0, a1, z0, z1);
-                        continue;
-                    }
-                    const double d0 = rng.grid(a0 + 0.3, a1 - 0.3 - DOOR_WIDTH, 0.1);
-                    const double d1 = d0 + DOOR_WIDTH;
-                    add(a0, d0, z0, z1);
-                    add(d0, d1, z0 + DOOR_HEIGHT, z1);
-                    add(d1, a1, z0, z1);
-                }
-                shell.push_back(std::move(wall));
-            }
+        plan_walls(grid, s, prefix, rng, shell);
+    }
+    return shell;
+}
+
+// The scene file's contents as they are written, and the summary.
+class SceneWriter {
+  public:
+    SceneWriter(const std::filesystem::path& out, std::size_t total_objects,
+                const ProgressFn& progress, GeneratedSummary& summary)
+        : m_out(out), m_total(total_objects), m_progress(progress), m_summary(summary) {}
+
+    // Meshes and writes one shell object (an OFF file under shell/).
+    Status add_shell(const ShellObject& object) {
+        const Affine identity;
+        ModelObject mesh_object;
+        Mesher mesher(mesh_object.mesh, m_circles, 1.0);
+        for (const Box& b : object.boxes) {
+            mesher(b);
+        }
+        m_welder.weld(mesh_object.mesh);
+        const std::string file = shell_file_name(object.name);
+        if (Status s = write_off((m_out / file).string(), mesh_object.mesh); !s.ok()) {
+            return Status(StatusCode::unavailable, "building: " + s.message());
+        }
+        for (const auto& v : mesh_object.mesh.vertices) {
+            m_summary.box.extend(identity.apply(v));
+        }
+        m_summary.objects += 1;
+        m_summary.triangles += mesh_object.mesh.triangles.size();
+        m_summary.vertices += mesh_object.mesh.vertices.size();
+        m_meshes[object.name] = file;
+        m_objects.push_back(scene_object(object.name, object.name, identity));
+        report();
+        return {};
+    }
+
+    // One furniture instance; its model's file is listed on first use.
+    void add_instance(const Instance& instance, const FurnitureModel& model, bool first_use) {
+        if (first_use) {
+            m_meshes[model.key] = model.path;
+        }
+        for (const auto& v : model.mesh.vertices) {
+            m_summary.box.extend(instance.transform.apply(v));
+        }
+        m_summary.objects += 1;
+        m_summary.triangles += model.mesh.triangles.size();
+        m_summary.vertices += model.mesh.vertices.size();
+        m_objects.push_back(scene_object(instance.name, model.key, instance.transform));
+        report();
+    }
+
+    Status write_scene(const std::string& scene_file) {
+        nlohmann::ordered_json scene;
+        scene["format"] = "proxima-scene/1";
+        scene["meshes"] = std::move(m_meshes);
+        scene["objects"] = std::move(m_objects);
+        std::ofstream file(scene_file, std::ios::binary | std::ios::trunc);
+        file << scene.dump(1) << '\n';
+        if (!file.good()) {
+            return Status(StatusCode::unavailable, "building: cannot write '" + scene_file + "'");
+        }
+        return {};
+    }
+
+  private:
+    void report() {
+        if (m_progress) {
+            m_progress({"writing", ++m_written, m_total, "objects"});
         }
     }
 
+    std::filesystem::path m_out;
+    std::size_t m_total;
+    const ProgressFn& m_progress;
+    GeneratedSummary& m_summary;
+    std::size_t m_written = 0;
+    nlohmann::ordered_json m_meshes = nlohmann::ordered_json::object();
+    nlohmann::ordered_json m_objects = nlohmann::ordered_json::array();
+    CircleCache m_circles;
+    Welder m_welder;
+};
+
+}  // namespace
+
+StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
+                                           const std::string& out_dir, const ProgressFn& progress) {
+    namespace fs = std::filesystem;
+    auto files = list_furniture(options);
+    if (!files.ok()) {
+        return files.status();
+    }
+    auto models = load_models(fs::path(options.furniture_dir), *files, progress);
+    if (!models.ok()) {
+        return models.status();
+    }
+
+    Rng rng(mix64(options.seed ^ 0x6275696c64696e67ull));
+    const std::vector<std::uint32_t> picks = pick_models(*models, options.triangles, rng);
+    const RoomGrid grid = room_grid(picks.size());
+    Placer placer(grid, rng);
+    for (std::uint32_t pick : picks) {
+        if (Status s = placer.place(pick, (*models)[pick]); !s.ok()) {
+            return s;
+        }
+    }
+    const std::vector<Instance>& instances = placer.instances();
+    const std::vector<ShellObject> shell = plan_shell(grid, placer.storeys(), rng);
+
     // Write the shell meshes and the scene file.
+    std::error_code ec;
     const fs::path out(out_dir);
     fs::create_directories(out / "shell", ec);
     if (ec) {
@@ -1478,67 +1710,21 @@ StatusOr<GeneratedScene> generate_building(const BuildingOptions& options,
                                                    (out / "shell").string() + "': " + ec.message());
     }
     GeneratedScene result;
-    GeneratedSummary& summary = result.summary;
-    nlohmann::ordered_json meshes = nlohmann::ordered_json::object();
-    nlohmann::ordered_json objects = nlohmann::ordered_json::array();
-    const Affine identity;
-    const std::size_t total_objects = shell.size() + instances.size();
-    std::size_t written = 0;
-    CircleCache circles;
-    Welder welder;
+    SceneWriter writer(out, shell.size() + instances.size(), progress, result.summary);
     for (const ShellObject& object : shell) {
-        ModelObject mesh_object;
-        Mesher mesher(mesh_object.mesh, circles, 1.0);
-        for (const Box& b : object.boxes) {
-            mesher(b);
-        }
-        welder.weld(mesh_object.mesh);
-        const std::string file = shell_file_name(object.name);
-        if (Status s = write_off((out / file).string(), mesh_object.mesh); !s.ok()) {
-            return Status(StatusCode::unavailable, "building: " + s.message());
-        }
-        for (const auto& v : mesh_object.mesh.vertices) {
-            summary.box.extend(identity.apply(v));
-        }
-        summary.objects += 1;
-        summary.triangles += mesh_object.mesh.triangles.size();
-        summary.vertices += mesh_object.mesh.vertices.size();
-        meshes[object.name] = file;
-        objects.push_back(scene_object(object.name, object.name, identity));
-        if (progress) {
-            progress({"writing", ++written, total_objects, "objects"});
+        if (Status s = writer.add_shell(object); !s.ok()) {
+            return s;
         }
     }
-    std::vector<bool> used(models.size(), false);
+    std::vector<bool> used(models->size(), false);
     for (const Instance& instance : instances) {
-        const FurnitureModel& model = models[instance.model];
-        if (!used[instance.model]) {
-            used[instance.model] = true;
-            meshes[model.key] = model.path;
-        }
-        for (const auto& v : model.mesh.vertices) {
-            summary.box.extend(instance.transform.apply(v));
-        }
-        summary.objects += 1;
-        summary.triangles += model.mesh.triangles.size();
-        summary.vertices += model.mesh.vertices.size();
-        objects.push_back(scene_object(instance.name, model.key, instance.transform));
-        if (progress) {
-            progress({"writing", ++written, total_objects, "objects"});
-        }
+        const bool first_use = !used[instance.model];
+        used[instance.model] = true;
+        writer.add_instance(instance, (*models)[instance.model], first_use);
     }
-    nlohmann::ordered_json scene;
-    scene["format"] = "proxima-scene/1";
-    scene["meshes"] = std::move(meshes);
-    scene["objects"] = std::move(objects);
     result.scene_file = (out / "scene.json").string();
-    {
-        std::ofstream file(result.scene_file, std::ios::binary | std::ios::trunc);
-        file << scene.dump(1) << '\n';
-        if (!file.good()) {
-            return Status(StatusCode::unavailable,
-                          "building: cannot write '" + result.scene_file + "'");
-        }
+    if (Status s = writer.write_scene(result.scene_file); !s.ok()) {
+        return s;
     }
     return result;
 }

@@ -81,6 +81,217 @@ StatusOr<Schedule> schedule_for(const Store& store, double tolerance, std::uint6
     return schedule;
 }
 
+namespace {
+
+// The edges in processing order (the schedule's subgraphs one after the other).
+std::vector<std::pair<std::uint32_t, std::uint32_t>> edges_in_order(const Schedule& schedule) {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+    edges.reserve(schedule.edge_count);
+    for (const auto& sg : schedule.subgraphs) {
+        edges.insert(edges.end(), sg.edges.begin(), sg.edges.end());
+    }
+    return edges;
+}
+
+// Triangles of the pieces that take part in at least one edge.
+std::uint64_t edge_triangles(const std::vector<std::pair<std::uint32_t, std::uint32_t>>& edges,
+                             const std::vector<PieceInfo>& pieces) {
+    std::vector<std::uint8_t> used(pieces.size(), 0);
+    for (const auto& [a, b] : edges) {
+        used[a] = used[b] = 1;
+    }
+    std::uint64_t triangles = 0;
+    for (std::size_t p = 0; p < pieces.size(); ++p) {
+        triangles += used[p] != 0 ? pieces[p].triangle_count : 0;
+    }
+    return triangles;
+}
+
+// One object pair's best hit so far, and how many of its piece pairs are still to test.
+struct Aggregate {
+    std::uint32_t remaining = 0;
+    bool found = false;
+    double best_sq = 0.0;
+    ObjectPairResult result;
+};
+
+std::unordered_map<std::uint64_t, Aggregate> object_pairs(
+    const std::vector<std::pair<std::uint32_t, std::uint32_t>>& edges,
+    const std::vector<PieceInfo>& pieces) {
+    std::unordered_map<std::uint64_t, Aggregate> pairs;
+    for (const auto& [a, b] : edges) {
+        auto oa = pieces[a].object;
+        auto ob = pieces[b].object;
+        if (oa > ob) {
+            std::swap(oa, ob);
+        }
+        auto& agg = pairs[pair_key(oa, ob)];
+        agg.result.object_a = oa;
+        agg.result.object_b = ob;
+        ++agg.remaining;
+    }
+    return pairs;
+}
+
+// The piece pairs' tests, run by a pool of workers taking edges in order: the shared state, the
+// prefetch hints ahead of the workers and the streaming of every object pair whose last piece
+// pair is done.
+struct VerifyRun {
+    VerifyRun(const std::shared_ptr<const Store>& s, GeometryCache& c,
+              const std::vector<std::pair<std::uint32_t, std::uint32_t>>& e,
+              std::unordered_map<std::uint64_t, Aggregate>& p,
+              const std::function<void(const ObjectPairResult&)>& on_pair_done,
+              const ProgressFn& progress_fn, const CancelToken* cancel_token)
+        : store(s),
+          cache(c),
+          edges(e),
+          pairs(p),
+          on_pair(on_pair_done),
+          progress(progress_fn),
+          cancel(cancel_token) {}
+
+    const std::shared_ptr<const Store>& store;
+    GeometryCache& cache;
+    const std::vector<std::pair<std::uint32_t, std::uint32_t>>& edges;
+    std::unordered_map<std::uint64_t, Aggregate>& pairs;
+    const std::function<void(const ObjectPairResult&)>& on_pair;
+    const ProgressFn& progress;
+    const CancelToken* cancel;
+    double tol_sq = 0.0;
+    double slack = 0.0;
+    std::uint64_t prefetch_budget = 0;
+    std::uint64_t stream = 0;
+
+    std::atomic<std::size_t> next{0};
+    std::atomic<std::size_t> done{0};
+    std::atomic<std::uint64_t> exact_tests{0};
+    std::mutex result_mutex;    // aggregates and on_pair
+    std::mutex prefetch_mutex;  // hint issuing
+    std::size_t hinted_until = 0;
+    Status failure;
+    std::atomic<bool> failed{false};
+    std::vector<ObjectPairResult> found;
+
+    // Hints the pieces of the edges after `from`, up to the prefetch budget, in order.
+    void issue_hints(std::size_t from) {
+        std::lock_guard lock(prefetch_mutex);
+        if (from + 16 < hinted_until) {
+            return;
+        }
+        const auto& pieces = store->pieces();
+        std::vector<std::uint32_t> list;
+        std::uint64_t bytes = 0;
+        std::size_t k = from;
+        for (; k < edges.size() && bytes < prefetch_budget; ++k) {
+            for (auto p : {edges[k].first, edges[k].second}) {
+                if (!cache.resident(*store, p) &&
+                    std::find(list.begin(), list.end(), p) == list.end()) {
+                    list.push_back(p);
+                    bytes += pieces[p].weight();
+                }
+            }
+        }
+        hinted_until = k;
+        cache.prefetch(store, std::move(list), stream);
+    }
+
+    // Records the first failure (later ones are dropped); the workers then stop.
+    void fail(const Status& status) {
+        std::lock_guard lock(result_mutex);
+        if (!failed.exchange(true)) {
+            failure = status;
+        }
+    }
+
+    // Folds one piece pair's hit into its object pair; streams the object pair when complete.
+    void merge(const ResidentPiece& a, const ResidentPiece& b, const PairHit& hit) {
+        std::lock_guard lock(result_mutex);
+        auto& agg = pairs[pair_key(a.object, b.object)];
+        if (hit.found && better_hit(hit.squared_distance, hit.triangle_a, hit.triangle_b,
+                                    agg.result, agg.best_sq, agg.found)) {
+            agg.found = true;
+            agg.best_sq = hit.squared_distance;
+            agg.result.distance = std::sqrt(hit.squared_distance);
+            agg.result.triangle_a = hit.triangle_a;
+            agg.result.triangle_b = hit.triangle_b;
+            agg.result.point_a = hit.point_a;
+            agg.result.point_b = hit.point_b;
+        }
+        if (--agg.remaining == 0 && agg.found) {
+            found.push_back(agg.result);
+            if (on_pair) {
+                on_pair(agg.result);
+            }
+        }
+    }
+
+    // Tests edge k; false when the run must stop.
+    bool test_edge(std::size_t k) {
+        const auto& pieces = store->pieces();
+        auto [pa, pb] = edges[k];
+        if (pieces[pa].object > pieces[pb].object) {
+            std::swap(pa, pb);
+        }
+        auto ha = cache.get(store, pa);
+        auto hb = ha.ok() ? cache.get(store, pb) : StatusOr<PieceHandle>(ha.status());
+        if (!ha.ok() || !hb.ok()) {
+            fail(ha.ok() ? hb.status() : ha.status());
+            return false;
+        }
+        ResidentPiece& a = **ha;
+        ResidentPiece& b = **hb;
+        const PairHit hit = closest_pair({&a.bvh, &a.geometry.source_triangles},
+                                         {&b.bvh, &b.geometry.source_triangles}, tol_sq, slack);
+        exact_tests += hit.exact_tests;
+        merge(a, b, hit);
+        return true;
+    }
+
+    void worker() {
+        const std::size_t report_every = std::max<std::size_t>(1, edges.size() / 100);
+        for (;;) {
+            const std::size_t k = next.fetch_add(1);
+            if (k >= edges.size() || failed.load()) {
+                return;
+            }
+            if (cancel != nullptr && cancel->should_stop()) {
+                fail(cancel->cancelled()
+                         ? Status{StatusCode::cancelled, "cancelled"}
+                         : Status{StatusCode::deadline_exceeded, "deadline exceeded"});
+                return;
+            }
+            if (k % 32 == 0) {
+                issue_hints(k + 1);
+            }
+            if (!test_edge(k)) {
+                return;
+            }
+            const std::size_t d = done.fetch_add(1) + 1;
+            if (progress && (d % report_every == 0 || d == edges.size())) {
+                std::lock_guard lock(result_mutex);
+                progress({"verifying", d, edges.size(), "piece pairs"});
+            }
+        }
+    }
+
+    // Runs the workers (this thread and one per further arena slot) to the end.
+    void run() {
+        issue_hints(0);
+        const int threads = std::max(1, tbb::this_task_arena::max_concurrency());
+        std::vector<std::thread> pool;
+        for (int t = 1; t < threads; ++t) {
+            pool.emplace_back([this] { worker(); });
+        }
+        worker();
+        for (auto& t : pool) {
+            t.join();
+        }
+        cache.prefetch(store, {}, stream);
+    }
+};
+
+}  // namespace
+
 StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, GeometryCache& cache,
                                     const VerifyOptions& options,
                                     const std::function<void(const ObjectPairResult&)>& on_pair,
@@ -105,170 +316,35 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
 
     // The edges in processing order, and how many piece pairs each object pair has: an object
     // pair's result is final (and streamed) when its last piece pair is done.
-    const auto& pieces = store->pieces();
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
-    edges.reserve(schedule->edge_count);
-    for (const auto& sg : schedule->subgraphs) {
-        edges.insert(edges.end(), sg.edges.begin(), sg.edges.end());
-    }
+    const auto edges = edges_in_order(*schedule);
     stats.edges = edges.size();
-    {
-        std::vector<std::uint8_t> used(pieces.size(), 0);
-        for (const auto& [a, b] : edges) {
-            used[a] = used[b] = 1;
-        }
-        for (std::size_t p = 0; p < pieces.size(); ++p) {
-            stats.edge_triangles += used[p] != 0 ? pieces[p].triangle_count : 0;
-        }
-    }
-    struct Aggregate {
-        std::uint32_t remaining = 0;
-        bool found = false;
-        double best_sq = 0.0;
-        ObjectPairResult result;
-    };
-    std::unordered_map<std::uint64_t, Aggregate> pairs;
-    for (const auto& [a, b] : edges) {
-        auto oa = pieces[a].object;
-        auto ob = pieces[b].object;
-        if (oa > ob) {
-            std::swap(oa, ob);
-        }
-        auto& agg = pairs[pair_key(oa, ob)];
-        agg.result.object_a = oa;
-        agg.result.object_b = ob;
-        ++agg.remaining;
-    }
+    stats.edge_triangles = edge_triangles(edges, store->pieces());
+    auto pairs = object_pairs(edges, store->pieces());
     stats.object_pairs = pairs.size();
 
-    const double tol_sq = options.tolerance * options.tolerance;
-    const double slack = model_slack(*store);
-    const std::uint64_t prefetch_budget =
+    VerifyRun run(store, cache, edges, pairs, on_pair, progress, cancel);
+    run.tol_sq = options.tolerance * options.tolerance;
+    run.slack = model_slack(*store);
+    run.prefetch_budget =
         static_cast<std::uint64_t>(options.prefetch_share * static_cast<double>(cache.budget()));
-    const std::uint64_t stream = reinterpret_cast<std::uintptr_t>(&stats);
+    run.stream = reinterpret_cast<std::uintptr_t>(&stats);
 
     // The cache may be shared (the daemon's): this run's counters are the difference.
     const CacheStats before = cache.stats();
     const auto t0 = std::chrono::steady_clock::now();
-    std::atomic<std::size_t> next{0};
-    std::atomic<std::size_t> done{0};
-    std::atomic<std::uint64_t> exact_tests{0};
-    std::mutex result_mutex;    // aggregates and on_pair
-    std::mutex prefetch_mutex;  // hint issuing
-    std::size_t hinted_until = 0;
-    Status failure;
-    std::atomic<bool> failed{false};
-    std::vector<ObjectPairResult> found;
-
-    // Hints the pieces of the edges after `from`, up to the prefetch budget, in order.
-    auto issue_hints = [&](std::size_t from) {
-        std::lock_guard lock(prefetch_mutex);
-        if (from + 16 < hinted_until) {
-            return;
-        }
-        std::vector<std::uint32_t> list;
-        std::uint64_t bytes = 0;
-        std::size_t k = from;
-        for (; k < edges.size() && bytes < prefetch_budget; ++k) {
-            for (auto p : {edges[k].first, edges[k].second}) {
-                if (!cache.resident(*store, p) &&
-                    std::find(list.begin(), list.end(), p) == list.end()) {
-                    list.push_back(p);
-                    bytes += pieces[p].weight();
-                }
-            }
-        }
-        hinted_until = k;
-        cache.prefetch(store, std::move(list), stream);
-    };
-
-    const std::size_t report_every = std::max<std::size_t>(1, edges.size() / 100);
-    auto worker = [&] {
-        for (;;) {
-            const std::size_t k = next.fetch_add(1);
-            if (k >= edges.size() || failed.load()) {
-                return;
-            }
-            if (cancel != nullptr && cancel->should_stop()) {
-                std::lock_guard lock(result_mutex);
-                if (!failed.exchange(true)) {
-                    failure = cancel->cancelled()
-                                  ? Status{StatusCode::cancelled, "cancelled"}
-                                  : Status{StatusCode::deadline_exceeded, "deadline exceeded"};
-                }
-                return;
-            }
-            if (k % 32 == 0) {
-                issue_hints(k + 1);
-            }
-            auto [pa, pb] = edges[k];
-            if (pieces[pa].object > pieces[pb].object) {
-                std::swap(pa, pb);
-            }
-            auto ha = cache.get(store, pa);
-            auto hb = ha.ok() ? cache.get(store, pb) : StatusOr<PieceHandle>(ha.status());
-            if (!ha.ok() || !hb.ok()) {
-                std::lock_guard lock(result_mutex);
-                if (!failed.exchange(true)) {
-                    failure = ha.ok() ? hb.status() : ha.status();
-                }
-                return;
-            }
-            ResidentPiece& a = **ha;
-            ResidentPiece& b = **hb;
-            const PairHit hit = closest_pair({&a.bvh, &a.geometry.source_triangles},
-                                             {&b.bvh, &b.geometry.source_triangles}, tol_sq, slack);
-            exact_tests += hit.exact_tests;
-            {
-                std::lock_guard lock(result_mutex);
-                auto& agg = pairs[pair_key(a.object, b.object)];
-                if (hit.found && better_hit(hit.squared_distance, hit.triangle_a, hit.triangle_b,
-                                            agg.result, agg.best_sq, agg.found)) {
-                    agg.found = true;
-                    agg.best_sq = hit.squared_distance;
-                    agg.result.distance = std::sqrt(hit.squared_distance);
-                    agg.result.triangle_a = hit.triangle_a;
-                    agg.result.triangle_b = hit.triangle_b;
-                    agg.result.point_a = hit.point_a;
-                    agg.result.point_b = hit.point_b;
-                }
-                if (--agg.remaining == 0 && agg.found) {
-                    found.push_back(agg.result);
-                    if (on_pair) {
-                        on_pair(agg.result);
-                    }
-                }
-            }
-            const std::size_t d = done.fetch_add(1) + 1;
-            if (progress && (d % report_every == 0 || d == edges.size())) {
-                std::lock_guard lock(result_mutex);
-                progress({"verifying", d, edges.size(), "piece pairs"});
-            }
-        }
-    };
-    issue_hints(0);
-    const int threads = std::max(1, tbb::this_task_arena::max_concurrency());
-    std::vector<std::thread> pool;
-    for (int t = 1; t < threads; ++t) {
-        pool.emplace_back(worker);
-    }
-    worker();
-    for (auto& t : pool) {
-        t.join();
-    }
-    cache.prefetch(store, {}, stream);
-    if (failed.load()) {
-        return failure;
+    run.run();
+    if (run.failed.load()) {
+        return run.failure;
     }
     stats.seconds = seconds_since(t0);
-    stats.exact_tests = exact_tests.load();
-    stats.pairs_found = found.size();
+    stats.exact_tests = run.exact_tests.load();
+    stats.pairs_found = run.found.size();
     stats.cache = counters_since(before, cache.stats());
     if (all != nullptr) {
-        std::sort(found.begin(), found.end(), [](const auto& x, const auto& y) {
+        std::sort(run.found.begin(), run.found.end(), [](const auto& x, const auto& y) {
             return std::tie(x.object_a, x.object_b) < std::tie(y.object_a, y.object_b);
         });
-        *all = std::move(found);
+        *all = std::move(run.found);
     }
     return stats;
 }

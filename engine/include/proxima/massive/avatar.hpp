@@ -129,6 +129,8 @@ class AvatarTracker {
     const std::vector<Vec3>& posed_vertices() const { return m_posed; }
 
   private:
+    struct Query;  // one query's state and steps (avatar.cpp)
+
     AvatarTracker() = default;
     std::shared_ptr<ModelView> m_view;
     TriangleMesh m_mesh;
