@@ -502,7 +502,7 @@ struct AvatarTracker::Query {
             }
         }
         result.prefetch_hints = hints.size();
-        cache.prefetch(store, std::move(hints), tracker.m_id + 1);
+        cache.prefetch(store, hints, tracker.m_id + 1);
     }
 };
 

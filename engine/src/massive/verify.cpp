@@ -192,7 +192,7 @@ struct VerifyRun {
             }
         }
         hinted_until = k;
-        cache.prefetch(store, std::move(list), stream);
+        cache.prefetch(store, list, stream);
     }
 
     // Records the first failure (later ones are dropped); the workers then stop.
