@@ -331,7 +331,7 @@ struct Options {
     std::string data = PROXIMA_DATA_DIR;
     std::vector<std::string> scenes;  // empty: all
     std::string command_line;
-    std::size_t stream = 0;            // --stream N: only the per-frame stream spread
+    std::size_t stream = 0;                     // --stream N: only the per-frame stream spread
     CullerKind culler = CullerKind::automatic;  // of the stream
 };
 
@@ -719,7 +719,7 @@ struct StreamSummary {
     std::vector<double> frame;  // seconds, frames 1..N-1 (frame 0 builds)
     double build = 0;
     std::map<std::string, std::size_t> cullers;  // culler -> frames it ran (1..N-1)
-    std::uint64_t voronoi_frames = 0;           // frames 1..N-1 that ran Stage II (dvd samples)
+    std::uint64_t voronoi_frames = 0;            // frames 1..N-1 that ran Stage II (dvd samples)
     std::string skipped;
 };
 
@@ -840,8 +840,16 @@ int run_streams(const Options& opt) {
     t.title = "Per-frame stream: separation + self + collisions, culler " +
               std::string(culler_name(opt.culler)) + ", frames 1.." +
               std::to_string(opt.stream - 1) + " (ms)";
-    t.header = {"scene",  "triangles", "build (frame 0)", "median",     "p99", "max",
-                "p99 / median", "max / median", "cullers (frames)", "frames with Voronoi stage"};
+    t.header = {"scene",
+                "triangles",
+                "build (frame 0)",
+                "median",
+                "p99",
+                "max",
+                "p99 / median",
+                "max / median",
+                "cullers (frames)",
+                "frames with Voronoi stage"};
     std::uint64_t unasked_voronoi = 0;
     for (const auto& name : names) {
         std::fprintf(stderr, "stream %s: %zu frames...\n", name.c_str(), opt.stream);
@@ -864,8 +872,9 @@ int run_streams(const Options& opt) {
             unasked_voronoi += s.voronoi_frames;
         }
     }
-    t.notes = {"frame = Scene::apply of the frame's update + ProximityEngine::query; p99 by "
-               "nearest rank; real/<scene> alternates the pair's t1, t0, t1, ..."};
+    t.notes = {
+        "frame = Scene::apply of the frame's update + ProximityEngine::query; p99 by "
+        "nearest rank; real/<scene> alternates the pair's t1, t0, t1, ..."};
     t.print(std::cout);
     if (!opt.markdown.empty()) {
         std::ofstream md(opt.markdown);
