@@ -546,14 +546,9 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
         }
         return false;
     };
-    auto stop_status = [&]() -> Status {
-        if (cancel != nullptr && cancel->cancelled()) {
-            return {StatusCode::cancelled, "ccd cancelled by the caller"};
-        }
-        return {StatusCode::deadline_exceeded, "ccd stopped: deadline exceeded"};
-    };
+    auto stopped_status = [&]() -> Status { return stop_status(*cancel, "ccd"); };
     if (should_stop()) {
-        return stop_status();
+        return stopped_status();
     }
 
     CcdResult result;
@@ -639,7 +634,7 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
             triangle_pairs.fetch_add(trav.triangle_pairs, std::memory_order_relaxed);
         });
         if (should_stop()) {
-            return stop_status();
+            return stopped_status();
         }
         for (std::size_t j = 0; j < count; ++j) {
             offsets[j + 1] = offsets[j] + candidates[j].size();
@@ -675,7 +670,7 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
                 }
             });
         if (should_stop()) {
-            return stop_status();
+            return stopped_status();
         }
         const auto t2 = Clock::now();
         result.stats.broad_phase_seconds += std::chrono::duration<double>(t1 - t0).count();

@@ -291,7 +291,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             continue;
         }
         if (stopped()) {
-            return Status{StatusCode::cancelled, "avatar query cancelled"};
+            return stop_status(*cancel, "avatar query");
         }
         std::uint32_t object = 0;
         auto hit = test(p, nullptr, tol_sq, false, object);
@@ -421,7 +421,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
                     break;
                 }
                 if (stopped()) {
-                    return Status{StatusCode::cancelled, "avatar query cancelled"};
+                    return stop_status(*cancel, "avatar query");
                 }
                 std::uint32_t object = 0;
                 auto hit = test(p, nullptr, bound_now(), true, object);

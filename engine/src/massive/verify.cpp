@@ -192,9 +192,7 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
             if (cancel != nullptr && cancel->should_stop()) {
                 std::lock_guard lock(result_mutex);
                 if (!failed.exchange(true)) {
-                    failure = cancel->cancelled()
-                                  ? Status{StatusCode::cancelled, "cancelled"}
-                                  : Status{StatusCode::deadline_exceeded, "deadline exceeded"};
+                    failure = stop_status(*cancel, "verification");
                 }
                 return;
             }
@@ -410,7 +408,7 @@ StatusOr<std::vector<ObjectPairResult>> verify_brute_force(const Store& store, d
         }
     });
     if (stopped) {
-        return Status{StatusCode::cancelled, "cancelled"};
+        return stop_status(*cancel, "verification");
     }
     std::vector<ObjectPairResult> out;
     for (auto& v : per) {
