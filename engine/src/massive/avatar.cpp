@@ -468,7 +468,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
             }
         }
         result.prefetch_hints = hints.size();
-        cache.prefetch(store, std::move(hints), m_id + 1);
+        cache.prefetch(store, hints, m_id + 1);
     }
     m_has_previous = true;
     m_previous_box = box;

@@ -179,7 +179,7 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
             }
         }
         hinted_until = k;
-        cache.prefetch(store, std::move(list), stream);
+        cache.prefetch(store, list, stream);
     };
 
     const std::size_t report_every = std::max<std::size_t>(1, edges.size() / 100);
