@@ -20,6 +20,7 @@
 #include "client/proxima_client.hpp"
 #include "common/json_output.hpp"
 #include "common/local_scene.hpp"
+#include "proxima/frame_pipeline.hpp"
 #include "proxima/gpu/egl_backend.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
@@ -136,19 +137,16 @@ StatusOr<DistanceAnswer> query_local(const std::vector<client::InputObject>& obj
     if (auto applied = engine.scene().apply(std::move(update)); !applied.ok()) {
         return applied.status();
     }
-    auto result = engine.query(request);
-    if (!result.ok()) {
-        return result.status();
+    // The objects are the scene (as CreateScene makes it remotely); one frame queries it, through
+    // the same pipeline the daemon runs.
+    FrameRequest frame;
+    frame.queries = request;
+    frame.penetration = penetration;
+    auto outcome = run_frame(engine, std::move(frame), nullptr);
+    if (!outcome.ok()) {
+        return outcome.status();
     }
-    DistanceAnswer answer{std::move(result).value(), {}};
-    if (penetration) {
-        auto p = penetration_depths(engine.scene(), answer.result.collisions);
-        if (!p.ok()) {
-            return p.status();
-        }
-        answer.penetrations = std::move(p).value();
-    }
-    return answer;
+    return DistanceAnswer{std::move(outcome->result), std::move(outcome->penetrations)};
 }
 
 // The printers index file triangle maps with the result's indices: a daemon answering with indices
@@ -383,26 +381,24 @@ int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
                    const QueryRequest& request) {
     ProximityEngine engine;
     attach_gpu_if_asked(engine, request.culler);
-    SceneUpdate first;
-    first.additions = scene.initial;
-    if (auto r = engine.scene().apply(std::move(first)); !r.ok()) {
-        return fail(r.status());
-    }
     print_demo_header(args, scene);
     std::vector<double> engine_ms;
     for (std::size_t k = 0; k < scene.frame_count; ++k) {
-        if (k > 0) {
-            if (auto r = engine.scene().apply(scene.step(k, engine.scene())); !r.ok()) {
-                return fail(r.status());
-            }
+        FrameRequest frame;
+        frame.frame = k;
+        if (k == 0) {
+            frame.update.additions = scene.initial;
+        } else {
+            frame.update = scene.step(k, engine.scene());
         }
-        auto result = engine.query(request);
-        if (!result.ok()) {
-            return fail(result.status());
+        frame.queries = request;
+        auto outcome = run_frame(engine, std::move(frame), nullptr);
+        if (!outcome.ok()) {
+            return fail(outcome.status());
         }
         print_demo_frame(args, k, engine.scene().size(), engine.scene().triangle_count(),
-                         result.value(), std::nullopt);
-        engine_ms.push_back(result->stats.total_seconds * 1e3);
+                         outcome->result, std::nullopt);
+        engine_ms.push_back(outcome->result.stats.total_seconds * 1e3);
     }
     print_demo_spread(args, "engine time", engine_ms);
     return 0;

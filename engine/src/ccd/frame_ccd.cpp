@@ -525,12 +525,8 @@ class Stopper {
         return false;
     }
 
-    Status status() const {
-        if (m_cancel != nullptr && m_cancel->cancelled()) {
-            return {StatusCode::cancelled, "ccd cancelled by the caller"};
-        }
-        return {StatusCode::deadline_exceeded, "ccd stopped: deadline exceeded"};
-    }
+    // Only after should_stop() returned true (m_cancel is then set).
+    Status status() const { return stop_status(*m_cancel, "ccd"); }
 
   private:
     const CancelToken* m_cancel;

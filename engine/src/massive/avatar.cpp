@@ -306,7 +306,7 @@ struct AvatarTracker::Query {
                 continue;
             }
             if (stopped()) {
-                return Status{StatusCode::cancelled, "avatar query cancelled"};
+                return stop_status(*cancel, "avatar query");
             }
             std::uint32_t object = 0;
             auto hit = test(p, nullptr, tol_sq, false, object);
@@ -430,7 +430,7 @@ struct AvatarTracker::Query {
                 break;
             }
             if (stopped()) {
-                return Status{StatusCode::cancelled, "avatar query cancelled"};
+                return stop_status(*cancel, "avatar query");
             }
             std::uint32_t object = 0;
             auto hit = test(p, nullptr, bound_now(), true, object);

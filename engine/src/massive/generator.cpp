@@ -1023,13 +1023,6 @@ std::vector<ObjectPlan> plan_bay(std::uint64_t seed, std::uint32_t bay, double x
     return std::move(planner.objects);
 }
 
-Status stop_status(const CancelToken& cancel, const std::string& what) {
-    if (cancel.cancelled()) {
-        return {StatusCode::cancelled, what + ": cancelled"};
-    }
-    return {StatusCode::deadline_exceeded, what + ": deadline exceeded"};
-}
-
 }  // namespace
 
 StatusOr<GeneratedSummary> generate_plant(const PlantOptions& options, const ObjectSink& sink,

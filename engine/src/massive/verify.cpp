@@ -255,9 +255,7 @@ struct VerifyRun {
                 return;
             }
             if (cancel != nullptr && cancel->should_stop()) {
-                fail(cancel->cancelled()
-                         ? Status{StatusCode::cancelled, "cancelled"}
-                         : Status{StatusCode::deadline_exceeded, "deadline exceeded"});
+                fail(stop_status(*cancel, "verification"));
                 return;
             }
             if (k % 32 == 0) {
@@ -486,7 +484,7 @@ StatusOr<std::vector<ObjectPairResult>> verify_brute_force(const Store& store, d
         }
     });
     if (stopped) {
-        return Status{StatusCode::cancelled, "cancelled"};
+        return stop_status(*cancel, "verification");
     }
     std::vector<ObjectPairResult> out;
     for (auto& v : per) {

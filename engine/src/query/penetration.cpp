@@ -121,11 +121,8 @@ struct Stopper {
     }
 };
 
-Status stop_status(const CancelToken* cancel) {
-    if (cancel != nullptr && cancel->cancelled()) {
-        return Status(StatusCode::cancelled, "penetration depth cancelled by the caller");
-    }
-    return Status(StatusCode::deadline_exceeded, "penetration depth stopped: deadline exceeded");
+Status stopped_status(const CancelToken* cancel) {
+    return stop_status(*cancel, "penetration depth");  // only called once `cancel` said stop
 }
 
 // Overlapping features of one surface: its intersecting triangles (already in `state`) plus the
@@ -791,7 +788,7 @@ StatusOr<std::vector<Penetration>> penetration_depths(const Scene& scene,
     out.reserve(groups.size());
     for (auto& [key, pairs] : groups) {
         if (stop()) {
-            return stop_status(cancel);
+            return stopped_status(cancel);
         }
         std::sort(pairs.begin(), pairs.end());
         pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
@@ -803,7 +800,7 @@ StatusOr<std::vector<Penetration>> penetration_depths(const Scene& scene,
                             : two_objects(scene[key.first], info(key.first), scene[key.second],
                                           info(key.second), pairs, slack, p, stop);
         if (!ok) {
-            return stop_status(cancel);
+            return stopped_status(cancel);
         }
         out.push_back(std::move(p));
     }

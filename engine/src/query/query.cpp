@@ -767,10 +767,7 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
         stats.pns_pairs = result.pns.size();
     }
     if (work.stopped.load()) {
-        if (cancel != nullptr && cancel->cancelled()) {
-            return Status(StatusCode::cancelled, "query cancelled by the caller");
-        }
-        return Status(StatusCode::deadline_exceeded, "query stopped: deadline exceeded");
+        return stop_status(*cancel, "query");  // only a token sets `stopped`
     }
     stats.exact_tests = work.exact_tests.load();
     stats.brute_force_tests = brute_force_pairs(m_scene);

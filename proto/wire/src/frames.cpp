@@ -253,22 +253,50 @@ StatusOr<FrameRequest> decode_frame(const v1::Frame& frame) {
 
 // --- Results -----------------------------------------------------------------------------------
 
+namespace {
+
+void encode_ids(const std::vector<ObjectId>& added_ids,
+                const std::vector<std::vector<ObjectId>>& fragment_ids, v1::FrameResult* out) {
+    for (auto id : added_ids) {
+        out->add_added_ids(id);
+    }
+    for (const auto& ids : fragment_ids) {
+        auto* f = out->add_fragment_ids();
+        for (auto id : ids) {
+            f->add_ids(id);
+        }
+    }
+}
+
+void encode_query_result(const QueryResult& result, bool self_points, v1::FrameResult* out);
+
+}  // namespace
+
 void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
                          const QueryResult& result, bool self_points, v1::FrameResult* out) {
     out->mutable_object_ids()->Reserve(static_cast<int>(scene.size()));
     for (const auto& obj : scene.objects()) {
         out->add_object_ids(obj.id);
     }
-    for (auto id : changes.added_ids) {
-        out->add_added_ids(id);
-    }
-    for (const auto& ids : changes.fragment_ids) {
-        auto* f = out->add_fragment_ids();
-        for (auto id : ids) {
-            f->add_ids(id);
-        }
-    }
+    encode_ids(changes.added_ids, changes.fragment_ids, out);
+    encode_query_result(result, self_points, out);
+}
 
+void encode_frame_outcome(const FrameOutcome& outcome, bool self_points, v1::FrameResult* out) {
+    out->mutable_object_ids()->Add(outcome.object_ids.begin(), outcome.object_ids.end());
+    encode_ids(outcome.added_ids, outcome.fragment_ids, out);
+    encode_query_result(outcome.result, self_points, out);
+    for (const auto& p : outcome.penetrations) {
+        encode_penetration(p, out->add_penetrations());
+    }
+    if (outcome.ccd) {
+        encode_ccd_result(*outcome.ccd, out->mutable_ccd());
+    }
+}
+
+namespace {
+
+void encode_query_result(const QueryResult& result, bool self_points, v1::FrameResult* out) {
     out->mutable_separation()->Reserve(static_cast<int>(result.separation.size()));
     for (const auto& s : result.separation) {
         auto* r = out->add_separation();
@@ -310,6 +338,8 @@ void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
     encode_pairs(result.pns, out->mutable_pns());
     encode_stats(result.stats, out->mutable_stats());
 }
+
+}  // namespace
 
 void encode_penetration(const Penetration& p, v1::Penetration* out) {
     out->set_object(p.object);

@@ -18,26 +18,12 @@
 #include <tuple>
 #include <vector>
 
+#include "proxima/cancel.hpp"
 #include "proxima/culling/culler.hpp"
 #include "proxima/culling/sweep_and_prune.hpp"
 #include "proxima/scene.hpp"
 
 namespace proxima {
-
-// Lets a caller stop long work: cancellation or a deadline. Checked between work items, so a
-// query stops within one object or one chunk of triangles.
-class CancelToken {
-  public:
-    void cancel() { m_cancelled.store(true, std::memory_order_relaxed); }
-    void set_deadline(std::chrono::steady_clock::time_point t) { m_deadline = t; }
-    bool cancelled() const { return m_cancelled.load(std::memory_order_relaxed); }
-    bool expired() const { return m_deadline && std::chrono::steady_clock::now() >= *m_deadline; }
-    bool should_stop() const { return cancelled() || expired(); }
-
-  private:
-    std::atomic<bool> m_cancelled{false};
-    std::optional<std::chrono::steady_clock::time_point> m_deadline;
-};
 
 struct QueryRequest {
     bool separation = true;

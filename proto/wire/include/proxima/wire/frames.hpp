@@ -38,6 +38,10 @@ StatusOr<FrameRequest> decode_frame(const v1::Frame& frame);
 // points (6 doubles per triangle).
 void encode_frame_result(const Scene& scene, const SceneUpdateResult& changes,
                          const QueryResult& result, bool self_points, v1::FrameResult* out);
+// The whole outcome of the engine's run_frame (ids, queries, penetrations, CCD), as
+// encode_frame_result, encode_penetration and encode_ccd_result write it; no scene_id, frame or
+// stats.server_seconds.
+void encode_frame_outcome(const FrameOutcome& outcome, bool self_points, v1::FrameResult* out);
 void encode_penetration(const Penetration& p, v1::Penetration* out);
 void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out);
 
