@@ -184,7 +184,8 @@ stage_lint() {
   fi
   local production
   mapfile -t production < <(git ls-files 'engine/*.cpp' 'proto/*.cpp' 'server/*.cpp' 'clients/*.cpp')
-  run-clang-tidy -quiet -p build/release -j "$jobs" -warnings-as-errors='*' \
+  # .clang-tidy makes every warning an error (WarningsAsErrors), so run-clang-tidy fails on one.
+  run-clang-tidy -quiet -p build/release -j "$jobs" \
     "${production[@]/#/$here/}" >/tmp/proxima-clang-tidy.log 2>&1 || {
     grep -E 'warning:|error:' /tmp/proxima-clang-tidy.log | sort -u | head -n 200 >&2
     echo "FAILED: clang-tidy (full log in /tmp/proxima-clang-tidy.log)" >&2
