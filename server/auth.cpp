@@ -118,7 +118,7 @@ std::string sha256_hex(const std::string& data) {
     unsigned int length = 0;
     EVP_Digest(data.data(), data.size(), digest, &length, EVP_sha256(), nullptr);
     std::string out;
-    out.reserve(2 * length);
+    out.reserve(2 * static_cast<std::size_t>(length));
     char byte[3];
     for (unsigned int i = 0; i < length; ++i) {
         std::snprintf(byte, sizeof(byte), "%02x", digest[i]);

@@ -2,6 +2,7 @@
 // lifetime; everything else is in the proxima_server library.
 #include <csignal>
 #include <cstdio>
+#include <exception>
 #include <thread>
 #include <variant>
 
@@ -11,7 +12,9 @@
 #include "config.hpp"
 #include "daemon.hpp"
 
-int main(int argc, char** argv) {
+namespace {
+
+int run(int argc, char** argv) {
     using namespace proxima::server;
 
     // SIGTERM and SIGINT are blocked in every thread and taken by one thread with sigwait, so
@@ -51,4 +54,19 @@ int main(int argc, char** argv) {
     daemon.wait();
     signal_thread.join();
     return 0;
+}
+
+}  // namespace
+
+// Whatever escapes the daemon (an allocation failure at start-up, a library throwing) ends it with
+// a message and exit status 1, never with std::terminate's abort.
+int main(int argc, char** argv) {
+    try {
+        return run(argc, argv);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "proximad: fatal: %s\n", e.what());
+    } catch (...) {
+        std::fprintf(stderr, "proximad: fatal: unknown exception\n");
+    }
+    return 1;
 }

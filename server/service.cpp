@@ -856,13 +856,12 @@ grpc::ServerUnaryReactor* ProximityService::DeleteScene(grpc::CallbackServerCont
     }
     Status s;
     auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
-    if (!entry) {
-        s = unknown_scene(request->scene_id());
-    } else if (m_shared->scenes.erase(entry->id)) {
+    // Unknown, or deleted by someone else meanwhile: the same NOT_FOUND.
+    if (entry && m_shared->scenes.erase(entry->id)) {
         spdlog::info("scene deleted method=DeleteScene who={} scene={}",
                      call->principal()->log_name(), entry->id);
     } else {
-        s = unknown_scene(request->scene_id());  // deleted by someone else meanwhile
+        s = unknown_scene(request->scene_id());
     }
     // Freeing a large engine takes a while: let a worker do it, not gRPC's callback thread. (A
     // frame still holding the scene frees it when it ends instead.)

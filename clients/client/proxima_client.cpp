@@ -1316,7 +1316,7 @@ struct ResilientScene::Impl {
                 pb::DeleteSceneRequest request;
                 request.set_scene_id(scene_id);
                 pb::DeleteSceneResponse response;
-                const auto st = from_grpc(c.stub_now()->DeleteScene(&context, request, &response));
+                auto st = from_grpc(c.stub_now()->DeleteScene(&context, request, &response));
                 if (st.code() == StatusCode::unavailable) {
                     return st;
                 }

@@ -13,7 +13,7 @@ std::string format_duration(double seconds) {
     if (!std::isfinite(seconds) || seconds < 0) {
         return "?";
     }
-    const auto s = static_cast<long long>(seconds + 0.5);
+    const auto s = std::llround(seconds);
     char buf[32];
     if (s >= 3600) {
         std::snprintf(buf, sizeof buf, "%lld:%02lld:%02lld", s / 3600, (s / 60) % 60, s % 60);
@@ -28,7 +28,7 @@ std::string format_duration(double seconds) {
 std::string format_amount(double amount, const std::string& unit) {
     char buf[64];
     if (unit == "bytes") {
-        static const char* const names[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+        static const char* const NAMES[] = {"B", "KiB", "MiB", "GiB", "TiB"};
         int k = 0;
         while (amount >= 1024 && k < 4) {
             amount /= 1024;
@@ -37,11 +37,11 @@ std::string format_amount(double amount, const std::string& unit) {
         if (k == 0) {
             std::snprintf(buf, sizeof buf, "%.0f B", amount);
         } else {
-            std::snprintf(buf, sizeof buf, "%.*f %s", amount < 10 ? 2 : 1, amount, names[k]);
+            std::snprintf(buf, sizeof buf, "%.*f %s", amount < 10 ? 2 : 1, amount, NAMES[k]);
         }
         return buf;
     }
-    static const char* const names[] = {"", "K", "M", "G", "T"};
+    static const char* const NAMES[] = {"", "K", "M", "G", "T"};
     int k = 0;
     while (amount >= 1000 && k < 4) {
         amount /= 1000;
@@ -50,7 +50,7 @@ std::string format_amount(double amount, const std::string& unit) {
     if (k == 0) {
         std::snprintf(buf, sizeof buf, "%.0f", amount);
     } else {
-        std::snprintf(buf, sizeof buf, "%.*f%s", amount < 10 ? 2 : 1, amount, names[k]);
+        std::snprintf(buf, sizeof buf, "%.*f%s", amount < 10 ? 2 : 1, amount, NAMES[k]);
     }
     return buf;
 }

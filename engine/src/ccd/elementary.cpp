@@ -191,7 +191,7 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
         }
         for (int q = 0; q < 3; ++q) {
             for (int end = 0; end < 2; ++end) {
-                const auto far = static_cast<std::size_t>(4 * end);
+                const std::size_t far = end == 0 ? 0 : 4;
                 const double x = points[static_cast<std::size_t>(pairs[q][0]) + far][k];
                 const double y = points[static_cast<std::size_t>(pairs[q][1]) + far][k];
                 pr.g[k][q][end] = x * scale - y * scale;

@@ -75,10 +75,10 @@ enum Binding : GLuint {
 };
 
 const char* binding_name(GLuint b) {
-    static const char* const names[] = {"triangle_vertices", "triangle_indices", "triangle_object",
+    static const char* const NAMES[] = {"triangle_vertices", "triangle_indices", "triangle_object",
                                         "bucket_offsets",    "bucket_triangles", "samples",
                                         "distance",          "nearest"};
-    return names[b];
+    return NAMES[b];
 }
 
 // One sample as the shader reads it (std430 struct of five 4-byte scalars: stride 20 bytes).

@@ -102,7 +102,7 @@ Status malformed(const std::string& what) {
 }  // namespace
 
 std::string serialize_schedule(const Schedule& schedule) {
-    std::size_t size = MAGIC.size() + 4 + 8 * 8 + 4;
+    std::size_t size = MAGIC.size() + std::size_t{4 + 8 * 8 + 4};
     for (const auto& s : schedule.subgraphs) {
         size += SUBGRAPH_HEADER + 4 * s.nodes.size() + 8 * s.edges.size();
     }

@@ -1191,12 +1191,12 @@ bool is_mesh_file_name(const fs::path& p) {
     if (ext == ".ply" || ext == ".off") {
         return true;
     }
-    static const std::set<std::string> generic = {".json", ".xml", ".raw", ".prj", ".txt", ""};
-    if (generic.count(ext) != 0) {
+    static const std::set<std::string> GENERIC = {".json", ".xml", ".raw", ".prj", ".txt", ""};
+    if (GENERIC.count(ext) != 0) {
         return false;
     }
-    static const Assimp::Importer importer;
-    return importer.IsExtensionSupported(ext);
+    static const Assimp::Importer IMPORTER;
+    return IMPORTER.IsExtensionSupported(ext);
 }
 
 // One object to import: a mesh file, or an object of a scene file.
@@ -1337,7 +1337,7 @@ StatusOr<StoreSummary> import_files(const std::vector<std::string>& inputs,
                 }
             }
         }
-        if (Status s = writer.value()->add(std::move(object)); !s.ok()) {
+        if (Status s = writer.value()->add(object); !s.ok()) {
             return s;
         }
         if (progress) {

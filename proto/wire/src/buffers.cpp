@@ -95,7 +95,7 @@ std::string pack_triangles(std::span<const TriangleIndices> triangles) {
         char* p = out.data();
         for (const auto& t : triangles) {
             for (int k = 0; k < 3; ++k) {
-                store_le(p + 4 * k, t[static_cast<std::size_t>(k)]);
+                store_le(p + 4 * static_cast<std::ptrdiff_t>(k), t[static_cast<std::size_t>(k)]);
             }
             p += TRIANGLE_BYTES;
         }
