@@ -602,13 +602,10 @@ StatusOr<FramePair> load_pair(const std::string& a, const std::string& b) {
     return pair;
 }
 
-RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::string>& log) {
+// The frame pair of a real scene: the two .ply files in <data>/frames/<scene>, in name order.
+StatusOr<FramePair> load_scene_pair(const std::string& data, const std::string& scene) {
     namespace fs = std::filesystem;
-    RealSummary s;
-    s.name = goal.label;
-    s.separation_goal = goal.separation_ms;
-    s.self_goal = goal.self_ms;
-    const fs::path dir = fs::path(opt.data) / "frames" / goal.scene;
+    const fs::path dir = fs::path(data) / "frames" / scene;
     std::vector<std::string> files;
     std::error_code ec;
     for (const auto& entry : fs::directory_iterator(dir, ec)) {
@@ -618,12 +615,19 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
     }
     std::sort(files.begin(), files.end());
     if (ec || files.size() != 2) {
-        s.skipped = "no frame pair in " + dir.string();
-        return s;
+        return not_found("no frame pair in " + dir.string());
     }
-    auto pair = load_pair(files[0], files[1]);
+    return load_pair(files[0], files[1]);
+}
+
+RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::string>& log) {
+    RealSummary s;
+    s.name = goal.label;
+    s.separation_goal = goal.separation_ms;
+    s.self_goal = goal.self_ms;
+    auto pair = load_scene_pair(opt.data, goal.scene);
     if (!pair.ok()) {
-        s.skipped = pair.status().to_string();
+        s.skipped = pair.status().message();
         return s;
     }
 
@@ -746,23 +750,9 @@ StreamSummary run_stream(const std::string& name, const Options& opt) {
     std::optional<scenes::ProceduralScene> procedural;
     std::optional<FramePair> pair;
     if (name.rfind("real/", 0) == 0) {
-        namespace fs = std::filesystem;
-        const fs::path dir = fs::path(opt.data) / "frames" / name.substr(5);
-        std::vector<std::string> files;
-        std::error_code ec;
-        for (const auto& entry : fs::directory_iterator(dir, ec)) {
-            if (entry.path().extension() == ".ply") {
-                files.push_back(entry.path().string());
-            }
-        }
-        std::sort(files.begin(), files.end());
-        if (ec || files.size() != 2) {
-            s.skipped = "no frame pair in " + dir.string();
-            return s;
-        }
-        auto loaded = load_pair(files[0], files[1]);
+        auto loaded = load_scene_pair(opt.data, name.substr(5));
         if (!loaded.ok()) {
-            s.skipped = loaded.status().to_string();
+            s.skipped = loaded.status().message();
             return s;
         }
         pair = std::move(loaded).value();
