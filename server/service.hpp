@@ -43,7 +43,8 @@ class ProximityService final : public v1::Proximity::CallbackService {
     grpc::ServerUnaryReactor* Query(grpc::CallbackServerContext* context, const v1::Frame* request,
                                     v1::FrameResult* response) override;
 
-    // Massive models, verification and review rooms (massive_service.cpp).
+    // Massive models, verification and review rooms (model_calls.cpp, verify_stream.cpp,
+    // review_stream.cpp).
     grpc::ServerUnaryReactor* ListModels(grpc::CallbackServerContext* context,
                                          const v1::ListModelsRequest* request,
                                          v1::ListModelsResponse* response) override;
@@ -83,7 +84,7 @@ class ProximityService final : public v1::Proximity::CallbackService {
     // jobs and kernel seconds on the GPU and on the CPU in its place.
     dvd::BackendStats gpu_stats() const;
 
-    struct Shared;  // state the reactors share; defined in service.cpp
+    struct Shared;  // state the reactors share; defined in service_internal.hpp
 
   private:
     void sample_metrics(std::vector<Sample>& out) const;

@@ -1,7 +1,6 @@
 #pragma once
-// What the service's reactors share, for the files that implement ProximityService
-// (service.cpp: scenes and frames; massive_service.cpp: models, verification and review rooms).
-// Private to server/.
+// What the service's reactors share, for the files that implement ProximityService (one file a
+// kind of call: service.cpp lists them). Private to server/.
 
 #include <algorithm>
 #include <chrono>
@@ -193,6 +192,15 @@ inline void log_call(ProximityService::Shared& shared, const char* method, const
 
 inline std::string scene_subject(const std::string& scene) {
     return "scene=" + (scene.empty() ? std::string("-") : scene);
+}
+
+// NOT_FOUND for a scene id no call may use (or INVALID_ARGUMENT for an empty one).
+inline Status unknown_scene(const std::string& id) {
+    if (id.empty()) {
+        return invalid_argument("scene_id is empty: name a scene made by CreateScene");
+    }
+    return not_found("scene " + id +
+                     " does not exist (never created, deleted, or private to a frame stream)");
 }
 
 inline Status shutting_down() {
