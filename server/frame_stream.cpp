@@ -25,7 +25,7 @@ namespace {
 class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult> {
   public:
     FrameStreamReactor(ProximityService::Shared& shared, grpc::CallbackServerContext* context)
-        : OrderedStream(shared, context, "StreamFrames", "stream cancelled by the client") {
+        : OrderedStream(shared, context, "StreamFrames", "stream") {
         open();
     }
 

@@ -125,16 +125,16 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
     }
 
   protected:
-    // `method` names the call in logs and metrics; `cancelled_message` is the CANCELLED status's
-    // message when the client goes away.
+    // `method` names the call in logs and metrics; `what` names the work in the CANCELLED status
+    // when the client goes away (stop_status: "<what> cancelled by the caller").
     OrderedStream(ProximityService::Shared& shared, grpc::CallbackServerContext* context,
-                  const char* method, std::string cancelled_message)
+                  const char* method, std::string what)
         : m_shared(shared),
           m_peer(context->peer()),
           m_start(Clock::now()),
           m_context(context),
           m_method(method),
-          m_cancelled_message(std::move(cancelled_message)) {
+          m_what(std::move(what)) {
         apply_deadline(m_cancel, *context);
     }
     ~OrderedStream() override = default;
@@ -264,7 +264,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         }
         Status final;
         if (m_cancelled || m_write_failed) {
-            final = {StatusCode::cancelled, m_cancelled_message};
+            final = stop_status(m_cancel, m_what);  // cancelled: both paths cancel the token
         } else if (m_error) {
             // A bad request: what was answered before it still reaches the client (unless the
             // stream was failed at once).
@@ -331,7 +331,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
 
     grpc::CallbackServerContext* m_context;  // until open()
     const char* const m_method;
-    const std::string m_cancelled_message;
+    const std::string m_what;
 
     Request m_incoming;             // target of the outstanding read
     std::deque<Queued> m_requests;  // read, not yet handled

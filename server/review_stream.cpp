@@ -39,7 +39,7 @@ class ReviewReactor final : public OrderedStream<v1::ReviewRequest, v1::ReviewEv
                             public MemberSink {
   public:
     ReviewReactor(ProximityService::Shared& shared, grpc::CallbackServerContext* context)
-        : OrderedStream(shared, context, "Review", "review stream cancelled by the client"),
+        : OrderedStream(shared, context, "Review", "review stream"),
           m_member(shared.rooms.make_member()) {
         {
             std::lock_guard lock(m_member->mu);

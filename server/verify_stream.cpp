@@ -204,7 +204,8 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
         }
         m_finished = true;
         if (stopped_locked() && m_status.ok()) {
-            m_final = {StatusCode::cancelled, "verification cancelled by the client"};
+            m_final =
+                stop_status(m_cancel, "verification");  // OnCancel and a failed write cancel it
         } else {
             m_final = m_status;
         }
