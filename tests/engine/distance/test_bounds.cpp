@@ -1,0 +1,165 @@
+// The triangle lower bounds (proxima/distance/bounds.hpp) directly: never above the computed exact
+// distance they stand in for (random pairs at several scales, touching and near-touching pairs,
+// slivers), tight where each is meant to be strong (parallel planes for the plane bound,
+// neighbours of one flat sheet for the axis bound), zero for intersecting triangles; and the
+// threshold helpers the searches compare against.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "proxima/distance/bounds.hpp"
+#include "proxima/distance/primitives.hpp"
+
+namespace proxima {
+namespace {
+
+double exact_distance(const Triangle& a, const Triangle& b) {
+    return std::sqrt(triangle_triangle(a, b).squared_distance);
+}
+
+double slack_of(const Triangle& a, const Triangle& b) {
+    Aabb box;
+    for (const auto& t : {a, b}) {
+        for (const auto& p : t) {
+            box.extend(p);
+        }
+    }
+    return rounding_slack(coordinate_scale(box));
+}
+
+Triangle random_triangle(std::mt19937_64& rng, const Vec3& centre, double size) {
+    std::uniform_real_distribution<double> u(-size, size);
+    Triangle t;
+    for (auto& p : t) {
+        p = centre + Vec3{u(rng), u(rng), u(rng)};
+    }
+    return t;
+}
+
+TEST(TriangleLowerBounds, NeverAboveTheComputedDistance) {
+    std::mt19937_64 rng(20261125);
+    int separated = 0;
+    for (const double scale : {1e-3, 1.0, 1e3, 1e6}) {
+        std::uniform_real_distribution<double> offset(-2.0 * scale, 2.0 * scale);
+        for (int i = 0; i < 4000; ++i) {
+            // Far from the origin too: the slack grows with the coordinates' magnitude.
+            const Vec3 base{offset(rng) * 10.0, offset(rng), offset(rng)};
+            const Triangle a = random_triangle(rng, base, scale);
+            const Triangle b =
+                random_triangle(rng, base + Vec3{offset(rng), offset(rng), offset(rng)}, scale);
+            const double slack = slack_of(a, b);
+            const double exact = exact_distance(a, b);
+            const double plane = plane_lower_bound(a, b, slack);
+            const double axis = axis_lower_bound(a, b, slack);
+            ASSERT_LE(plane, exact) << "scale " << scale << " pair " << i;
+            ASSERT_LE(axis, exact) << "scale " << scale << " pair " << i;
+            ASSERT_GE(plane, 0.0);
+            ASSERT_GE(axis, 0.0);
+            ASSERT_EQ(triangle_lower_bound(a, b, slack), std::max(plane, axis));
+            separated += exact > 0.0 && triangle_lower_bound(a, b, slack) > 0.0 ? 1 : 0;
+        }
+    }
+    // The bounds are useful, not just safe: most separated random pairs get a positive bound.
+    EXPECT_GT(separated, 8000);
+}
+
+TEST(TriangleLowerBounds, NearTouchingPairsStayBelowTheComputedDistance) {
+    // b is a copied at small gaps along a's normal and sideways: the bound must stay under the
+    // computed distance even when it is a few ulps.
+    std::mt19937_64 rng(7);
+    for (int i = 0; i < 2000; ++i) {
+        const Triangle a = random_triangle(rng, {100.0, -50.0, 3.0}, 1.0);
+        const Vec3 c = cross(a[1] - a[0], a[2] - a[0]);
+        const Vec3 n = (1.0 / norm(c)) * c;
+        const double gap = std::ldexp(1.0, -(i % 50));  // 1 down to 2^-49
+        Triangle b = a;
+        for (auto& p : b) {
+            p = p + gap * n + Vec3{1e-3 * (i % 3), 0.0, 0.0};
+        }
+        const double slack = slack_of(a, b);
+        const double exact = exact_distance(a, b);
+        ASSERT_LE(plane_lower_bound(a, b, slack), exact) << "gap " << gap;
+        ASSERT_LE(axis_lower_bound(a, b, slack), exact) << "gap " << gap;
+    }
+}
+
+TEST(TriangleLowerBounds, PlaneBoundIsTightForParallelTrianglesAbove) {
+    const Triangle a{Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0, 1, 0}};
+    const Triangle b{Vec3{0.1, 0.1, 2}, Vec3{0.6, 0.1, 2}, Vec3{0.1, 0.6, 2}};
+    const double slack = slack_of(a, b);
+    const double exact = exact_distance(a, b);
+    ASSERT_DOUBLE_EQ(exact, 2.0);
+    const double plane = plane_lower_bound(a, b, slack);
+    EXPECT_LE(plane, exact);
+    EXPECT_NEAR(plane, 2.0, 1e-9);
+}
+
+TEST(TriangleLowerBounds, AxisBoundSeparatesNeighboursOfOneFlatSheet) {
+    // Two coplanar triangles 0.25 apart along x: no supporting plane separates them, the
+    // centroid axis does.
+    const Triangle a{Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0, 1, 0}};
+    const Triangle b{Vec3{1.25, 0, 0}, Vec3{2.25, 0, 0}, Vec3{1.25, 1, 0}};
+    const double slack = slack_of(a, b);
+    const double exact = exact_distance(a, b);
+    EXPECT_DOUBLE_EQ(exact, 0.25);
+    EXPECT_EQ(plane_lower_bound(a, b, slack), 0.0);
+    const double axis = axis_lower_bound(a, b, slack);
+    EXPECT_GT(axis, 0.0);
+    EXPECT_LE(axis, exact);
+}
+
+TEST(TriangleLowerBounds, IntersectingAndTouchingTrianglesGetZero) {
+    const Triangle a{Vec3{0, 0, 0}, Vec3{2, 0, 0}, Vec3{0, 2, 0}};
+    const Triangle crossing{Vec3{0.5, 0.5, -1}, Vec3{0.5, 0.5, 1}, Vec3{1.5, 0.2, 0}};
+    const Triangle sharing_an_edge{Vec3{2, 0, 0}, Vec3{0, 2, 0}, Vec3{2, 2, 1}};
+    for (const auto& b : {crossing, sharing_an_edge}) {
+        const double slack = slack_of(a, b);
+        EXPECT_EQ(exact_distance(a, b), 0.0);
+        EXPECT_EQ(plane_lower_bound(a, b, slack), 0.0);
+        EXPECT_EQ(axis_lower_bound(a, b, slack), 0.0);
+    }
+}
+
+TEST(TriangleLowerBounds, SliversAreNeverTrustedAboveTheDistance) {
+    // Nearly collinear corners: the supporting plane's normal is noise.
+    std::mt19937_64 rng(99);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < 1000; ++i) {
+        const Vec3 p{u(rng), u(rng), u(rng)};
+        const Vec3 d{u(rng), u(rng), u(rng)};
+        const Triangle sliver{p, p + d, p + 0.5 * d + Vec3{1e-14 * u(rng), 0.0, 1e-14}};
+        const Triangle other = random_triangle(rng, p + Vec3{0.0, 0.0, 0.5}, 0.4);
+        const double slack = slack_of(sliver, other);
+        const double exact = exact_distance(sliver, other);
+        ASSERT_LE(plane_lower_bound(sliver, other, slack), exact);
+        ASSERT_LE(plane_lower_bound(other, sliver, slack), exact);
+        ASSERT_LE(axis_lower_bound(sliver, other, slack), exact);
+    }
+}
+
+TEST(CullThresholds, WidenTheBestDistanceAndFollowALiveBound) {
+    EXPECT_GT(cull_threshold_sq(4.0, 0.0), 4.0);
+    EXPECT_GT(cull_threshold_sq(4.0, 1e-6), cull_threshold_sq(4.0, 0.0));
+    EXPECT_EQ(cull_threshold_sq(0.0, 0.0), 0.0);
+    EXPECT_GT(cull_threshold_sq(0.0, 1e-9), 0.0);
+
+    double live = 9.0;
+    CullThreshold threshold(live, 1e-9);
+    EXPECT_EQ(threshold.get(), cull_threshold_sq(9.0, 1e-9));
+    live = 1.0;  // the search found a closer pair
+    EXPECT_EQ(threshold.get(), cull_threshold_sq(1.0, 1e-9));
+}
+
+TEST(CullThresholds, SlackGrowsWithTheCoordinatesMagnitude) {
+    Aabb box;
+    box.extend(Vec3{-3.0, 1.0, 2.0});
+    box.extend(Vec3{1.0, 5.0, -7.5});
+    EXPECT_EQ(coordinate_scale(box), 7.5);
+    EXPECT_EQ(rounding_slack(7.5), 1e-12 * 7.5);
+    EXPECT_LT(rounding_slack(1.0), rounding_slack(1e6));
+}
+
+}  // namespace
+}  // namespace proxima
