@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "auth.hpp"
+#include "proxima/io/size_text.hpp"
 
 namespace proxima::server {
 
@@ -35,6 +36,24 @@ Status read_unsigned(const nlohmann::json& value, const std::string& key, T& out
         return invalid_argument("config key '" + key + "' is too large: " + value.dump());
     }
     out = static_cast<T>(v);
+    return {};
+}
+
+// A byte count: a whole number, or a string with a K, M, G or T suffix (powers of 1024, the
+// command line's rule: "160M").
+template <class T>
+Status read_bytes(const nlohmann::json& value, const std::string& key, T& out) {
+    if (!value.is_string()) {
+        return read_unsigned(value, key, out);
+    }
+    auto v = parse_size("config key '" + key + "'", value.get<std::string>(), 1024);
+    if (!v.ok()) {
+        return v.status();
+    }
+    if (v.value() > std::numeric_limits<T>::max()) {
+        return invalid_argument("config key '" + key + "' is too large: " + value.dump());
+    }
+    out = static_cast<T>(v.value());
     return {};
 }
 
@@ -95,7 +114,7 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
         } else if (key == "max-triangles-per-scene") {
             s = read_unsigned(value, key, base.limits.max_triangles_per_scene);
         } else if (key == "max-message-bytes") {
-            s = read_unsigned(value, key, base.limits.max_message_bytes);
+            s = read_bytes(value, key, base.limits.max_message_bytes);
         } else if (key == "max-frames-in-flight") {
             s = read_unsigned(value, key, base.limits.max_frames_in_flight);
         } else if (key == "drain-seconds") {
@@ -109,7 +128,7 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
         } else if (key == "models") {
             s = read_string(value, key, base.models_dir);
         } else if (key == "cache-bytes") {
-            s = read_unsigned(value, key, base.cache_bytes);
+            s = read_bytes(value, key, base.cache_bytes);
         } else if (key == "tls-cert") {
             s = read_string(value, key, base.tls_cert);
         } else if (key == "tls-key") {
@@ -275,6 +294,21 @@ const CLI::Validator WHOLE_NUMBER(
     },
     "UINT");
 
+// A byte count with an optional K, M, G or T suffix (powers of 1024, as in proxima's options),
+// rewritten to the whole number.
+const CLI::Validator BYTE_SIZE(
+    [](std::string& text) -> std::string {
+        auto v = parse_size("", text, 1024);
+        if (!v.ok()) {
+            return "'" + text.substr(0, 40) +
+                   "' is not a size: a positive whole number with an optional K, M, G or T "
+                   "suffix (powers of 1024), e.g. 160M";
+        }
+        text = std::to_string(v.value());
+        return {};
+    },
+    "SIZE (K/M/G/T = 1024^n)", "byte_size");
+
 ConfigOutcome load_config(int argc, char** argv) {
     const ServerConfig defaults;
     ServerConfig flags;  // what the command line says; only options actually given are used
@@ -320,7 +354,7 @@ ConfigOutcome load_config(int argc, char** argv) {
         });
     add(app.add_option("--max-message-bytes", flags.limits.max_message_bytes,
                        "largest message received or sent, in bytes")
-            ->check(WHOLE_NUMBER)
+            ->transform(BYTE_SIZE)
             ->default_str(std::to_string(defaults.limits.max_message_bytes)),
         [&](ServerConfig& c) { c.limits.max_message_bytes = flags.limits.max_message_bytes; });
     add(app.add_option("--max-frames-in-flight", flags.limits.max_frames_in_flight,
@@ -358,7 +392,7 @@ ConfigOutcome load_config(int argc, char** argv) {
     add(app.add_option("--cache-bytes", flags.cache_bytes,
                        "budget in bytes of the geometry cache shared by every model, "
                        "verification and review room")
-            ->check(WHOLE_NUMBER)
+            ->transform(BYTE_SIZE)
             ->default_str(std::to_string(defaults.cache_bytes)),
         [&](ServerConfig& c) { c.cache_bytes = flags.cache_bytes; });
 
@@ -401,9 +435,15 @@ ConfigOutcome load_config(int argc, char** argv) {
 
     try {
         app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
     } catch (const CLI::ParseError& e) {
-        const int code = app.exit(e);
-        return code == 0 ? 0 : 2;
+        // One line in the project's words, as proxima prints usage errors; exit status 2.
+        std::fprintf(stderr, "proximad: error: %s\nRun 'proximad --help' for the options.\n",
+                     e.what());
+        return 2;
     }
     if (hash_token) {
         std::string token;

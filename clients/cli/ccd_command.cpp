@@ -242,8 +242,9 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
     cmd->add_option("--min-distance", args->min_distance,
-                    "Report contact when primitives come within this distance (default 0)")
-        ->check(CLI::NonNegativeNumber);
+                    "Report contact when primitives come within this distance")
+        ->check(non_negative_number())
+        ->capture_default_str();
     cmd->add_flag("--json", args->json, "Print one JSON object");
     cmd->add_option("files", args->files, "T0_FILE T1_FILE: the two frames (any mesh format)")
         ->required()

@@ -181,14 +181,14 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code) {
     cmd->add_flag("--json", args->json, "Print one JSON object");
     cmd->add_option("--min-distance", args->min_distance,
                     "Report contact when the primitives come within this distance")
-        ->check(CLI::NonNegativeNumber)
+        ->check(non_negative_number())
         ->capture_default_str();
     cmd->add_option("--tolerance", args->tolerance,
                     "Precision of the time of impact and size of the regions reported as contact")
-        ->check(CLI::PositiveNumber)
+        ->check(positive_number())
         ->capture_default_str();
     cmd->add_option("--max-boxes", args->max_boxes, "Work bound per query (regions examined)")
-        ->check(CLI::Range(1u, 4'000'000'000u))
+        ->check(whole_number(1, 4'000'000'000))
         ->capture_default_str();
     cmd->add_option("files", args->files, "CSV files of the benchmark format")->required();
     cmd->callback([args, &exit_code] { exit_code = run_ccd_queries(*args); });

@@ -9,8 +9,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli/args.hpp"
 #include "client/proxima_client.hpp"
 #include "common/local_scene.hpp"
+#include "proxima/io/size_text.hpp"
 
 namespace proxima::cli {
 
@@ -55,12 +57,6 @@ StatusOr<client::ConnectOptions> connect_options(const ServerFlags& flags,
 StatusOr<std::unique_ptr<client::Client>> connect_server(const std::string& address,
                                                          const ServerFlags& flags,
                                                          client::ConnectOptions base = {});
-// "16M" -> 16 * base^2: sizes with an optional K, M, G or T suffix ("MB", "MiB" and a bare "B"
-// accepted), base 1024 for bytes, 1000 for counts; "1.5G", "4096" too. INVALID_ARGUMENT naming
-// `option` for anything else, and for a result below 1 or above 1.8e19.
-StatusOr<std::uint64_t> parse_size(const std::string& option, const std::string& text,
-                                   std::uint64_t base);
-
 // One frame on the daemon in a scene of its own (clients/cli/remote.cpp): creates the scene with
 // `objects` in input order (so result indices mean what they mean locally), lets `fill` complete
 // the frame (it sees the scene's object ids), sends it with the Query RPC, then deletes the

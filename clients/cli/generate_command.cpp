@@ -243,9 +243,12 @@ void add_generate_command(CLI::App& app, int& exit_code) {
         "per object under OUT/meshes and OUT/scene.json");
     plant_cmd
         ->add_option("--triangles", plant->triangles,
-                     "Approximate triangle count (within 10%), K/M/G suffixes: 15M")
+                     "Approximate triangle count (within 10%); K, M, G: thousand, million, "
+                     "billion")
+        ->check(size_text(1000))
         ->capture_default_str();
     plant_cmd->add_option("--seed", plant->seed, "Seed (same options, same model)")
+        ->check(whole_number(0, UINT64_MAX))
         ->capture_default_str();
     plant_cmd->add_option("--out", plant->out, "Output directory")->required();
     plant_cmd->add_flag("--verify", plant->verify,
@@ -265,9 +268,12 @@ void add_generate_command(CLI::App& app, int& exit_code) {
         ->required();
     building_cmd
         ->add_option("--triangles", building->triangles,
-                     "Approximate triangle count, furniture included, K/M/G suffixes: 2M")
+                     "Approximate triangle count, furniture included; K, M, G: thousand, "
+                     "million, billion")
+        ->check(size_text(1000))
         ->capture_default_str();
     building_cmd->add_option("--seed", building->seed, "Seed (same options, same model)")
+        ->check(whole_number(0, UINT64_MAX))
         ->capture_default_str();
     building_cmd->add_option("--out", building->out, "Output directory")->required();
     building_cmd->add_flag("--quiet", building->quiet, "No progress on standard error");

@@ -193,18 +193,25 @@ void add_import_command(CLI::App& app, int& exit_code) {
         "Import mesh files, directories, scene files (*.json, proxima-scene/1) or a generated "
         "plant into a model store");
     cmd->add_option("--store", args->store, "The store directory (created if absent)")->required();
-    auto* max_piece = cmd->add_option(
-        "--max-piece-bytes", args->max_piece_bytes,
-        "Split objects into pieces of at most this cache weight (K/M/G: powers of 1024; "
-        "default 16M)");
+    auto* max_piece =
+        cmd->add_option("--max-piece-bytes", args->max_piece_bytes,
+                        "Split objects into pieces of at most this cache weight (default 16M)");
+    max_piece->check(size_text(1024));
     cmd->add_option("--cache-bytes", args->cache_bytes,
                     "The runtime cache size M: pieces are at most M/10")
+        ->check(size_text(1024))
         ->excludes(max_piece);
-    cmd->add_option("--chunk-bytes", args->chunk_bytes, "Checksummed chunk size (default 1M)");
+    cmd->add_option("--chunk-bytes", args->chunk_bytes, "Checksummed chunk size")
+        ->check(size_text(1024))
+        ->default_str(std::to_string(massive::StoreOptions{}.chunk_bytes));
     auto* plant = cmd->add_option("--plant", args->plant,
-                                  "Generate a plant of about this many triangles (K/M/G: powers "
-                                  "of 1000) instead of reading files");
-    cmd->add_option("--seed", args->seed, "Seed of the generated plant")->needs(plant);
+                                  "Generate a plant of about this many triangles (K, M, G: "
+                                  "thousand, million, billion) instead of reading files")
+                      ->check(size_text(1000));
+    cmd->add_option("--seed", args->seed, "Seed of the generated plant")
+        ->check(whole_number(0, UINT64_MAX))
+        ->capture_default_str()
+        ->needs(plant);
     cmd->add_flag("--quiet", args->quiet, "No progress on standard error");
     cmd->add_option("inputs", args->inputs, "Mesh files, directories or scene files");
     cmd->callback([args, &exit_code] { exit_code = run_import(*args); });

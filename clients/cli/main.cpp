@@ -647,8 +647,10 @@ int run_info(const InfoArgs& args) {
 
 int main(int argc, char** argv) {
     try {
-        CLI::App app{"proxima: exact proximity queries among deformable meshes"};
+        CLI::App app{"proxima: exact proximity queries among deformable meshes", "proxima"};
         app.require_subcommand(1);
+        app.set_version_flag("--version", "proxima " PROXIMA_VERSION);
+        app.footer("Exit status: 0 success, 1 bad input or a failed operation, 2 a usage error.");
         auto* version = app.add_subcommand("version", "Print the version");
 
         DistanceArgs dist;
@@ -664,6 +666,7 @@ int main(int argc, char** argv) {
             ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
                          "With --server: objects beyond this many bytes (in all) are uploaded "
                          "in chunks instead of inline")
+            ->transform(cli::size_text(1024))
             ->capture_default_str()
             ->needs(server_opt);
         distance->add_flag("--split-components", dist.split_components,
@@ -675,7 +678,7 @@ int main(int argc, char** argv) {
         distance
             ->add_option("--tolerance", dist.tolerance,
                          "Also: every triangle pair within this distance")
-            ->check(CLI::NonNegativeNumber);
+            ->check(cli::non_negative_number());
         distance->add_flag("--penetration", dist.penetration,
                            "Also: a local penetration vector per intersecting object pair "
                            "(implies --collisions)");
@@ -684,12 +687,13 @@ int main(int argc, char** argv) {
         distance
             ->add_option("--culler", dist.culler,
                          "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
-            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
+            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}))
+            ->capture_default_str();
         distance
             ->add_option("--voronoi-cell", dist.voronoi_cell,
                          "Voronoi cullers: grid cell size in scene units (default: the engine's "
                          "choice)")
-            ->check(CLI::PositiveNumber);
+            ->check(cli::positive_number());
         distance->add_flag("--json", dist.json, "Print one JSON object");
         distance->add_option("files", dist.files, "Mesh files (PLY, OFF, OBJ, STL, glTF/GLB)")
             ->required();
@@ -697,12 +701,15 @@ int main(int argc, char** argv) {
         DemoArgs demo_args;
         auto* demo = app.add_subcommand(
             "demo", "Stream a built-in deforming scene through the engine, frame by frame");
-        demo->add_option("--scene", demo_args.scene, "skirt, cloth-ball, bowl, ramps or breaking");
+        demo->add_option("--scene", demo_args.scene, "skirt, cloth-ball, bowl, ramps or breaking")
+            ->capture_default_str();
         demo->add_option("--frames", demo_args.frames, "Number of frames")
-            ->check(CLI::Range(1, 100000));
+            ->check(cli::whole_number(1, 100000))
+            ->capture_default_str();
         demo->add_option("--culler", demo_args.culler,
                          "auto, brute, bvh, voronoi-cpu or voronoi-gpu (headless EGL)")
-            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}));
+            ->check(CLI::IsMember({"auto", "brute", "bvh", "voronoi-cpu", "voronoi-gpu"}))
+            ->capture_default_str();
         auto* demo_server = demo->add_option(
             "--server", demo_args.server, "Stream the frames to the proximad daemon at HOST:PORT");
         cli::add_server_flags(*demo, demo_args.server_flags, demo_server);
@@ -721,12 +728,14 @@ int main(int argc, char** argv) {
         cli::add_generate_command(app, command_exit);
         cli::add_massive_commands(app, command_exit);
 
-        CLI11_PARSE(app, argc, argv);
+        if (const int code = cli::parse_command_line(app, argc, argv); code >= 0) {
+            return code;
+        }
         if (command_exit >= 0) {
             return command_exit;
         }
         if (*version) {
-            std::printf("proxima 0.1.0\n");
+            std::printf("proxima %s\n", PROXIMA_VERSION);
             return 0;
         }
         if (*distance) {

@@ -668,10 +668,12 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     verify
         ->add_option("--tolerance", verify_args->tolerance,
                      "Report object pairs within this distance (0: touching or intersecting)")
+        ->check(non_negative_number())
         ->required();
     verify
         ->add_option("--cache-bytes", verify_args->cache_bytes,
-                     "With --store: the cache budget (K, M, G suffixes; default 160M)")
+                     "With --store: the cache budget (default 160M)")
+        ->check(size_text(1024))
         ->needs(store_opt);
     verify
         ->add_flag("--brute-force", verify_args->brute_force,
@@ -680,9 +682,9 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     verify->add_option("--json", verify_args->json_file, "Write the JSON result to FILE")
         ->type_name("FILE");
     verify->add_flag("--quiet", verify_args->quiet, "No progress on standard error");
-    verify->callback([verify_args, &exit_code] {
+    verify->callback([verify, verify_args, &exit_code] {
         if (verify_args->store.empty() && verify_args->server.empty()) {
-            exit_code = fail(invalid_argument("verify needs --store DIR or --server ADDR"));
+            exit_code = usage_error(*verify, "verify needs --store DIR or --server ADDR");
             return;
         }
         exit_code = run_verify(*verify_args);
@@ -720,20 +722,24 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
                      "Poses, one a line: 12 numbers (row-major 3x4 transform) or 3 (x y z)")
         ->required()
         ->check(CLI::ExistingFile);
-    review->add_option("--tolerance", review_args->tolerance,
-                       "Report objects within this distance of the avatar (default 0)");
+    review
+        ->add_option("--tolerance", review_args->tolerance,
+                     "Report objects within this distance of the avatar")
+        ->check(non_negative_number())
+        ->capture_default_str();
     review->add_flag("--no-nearest", review_args->no_nearest,
                      "Do not look for the nearest object beyond the tolerance");
     review
         ->add_option("--cache-bytes", review_args->cache_bytes,
-                     "With --store: the cache budget (K, M, G suffixes; default 160M)")
+                     "With --store: the cache budget (default 160M)")
+        ->check(size_text(1024))
         ->needs(review_store);
     review->add_option("--json", review_args->json_file, "Write the JSON result to FILE")
         ->type_name("FILE");
     review->add_flag("--quiet", review_args->quiet, "No progress on standard error");
-    review->callback([review_args, &exit_code] {
+    review->callback([review, review_args, &exit_code] {
         if (review_args->store.empty() && review_args->server.empty()) {
-            exit_code = fail(invalid_argument("review needs --store DIR or --server ADDR"));
+            exit_code = usage_error(*review, "review needs --store DIR or --server ADDR");
             return;
         }
         exit_code = run_review(*review_args);

@@ -155,13 +155,15 @@ class MassiveCli(unittest.TestCase):
                 "0")
         self.assertEqual(p.returncode, 1)
         self.assertIn("proxima: error: NOT_FOUND", p.stderr)
+        # Usage errors (issue #18): exit 2, one line and the subcommand's --help.
         p = run(PROXIMA, "verify", "--tolerance", "0")
-        self.assertEqual(p.returncode, 1)
+        self.assertEqual(p.returncode, 2)
         self.assertIn("--store DIR or --server ADDR", p.stderr)
+        self.assertIn("Run 'proxima verify --help'", p.stderr)
         p = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0", "--cache-bytes",
                 "lots")
-        self.assertEqual(p.returncode, 1)
-        self.assertIn("--cache-bytes 'lots'", p.stderr)
+        self.assertEqual(p.returncode, 2)
+        self.assertIn("--cache-bytes: expected a positive number", p.stderr)
 
     @unittest.skipUnless(PROXIMAD, "no proximad given")
     def test_server_equals_local(self):

@@ -165,5 +165,27 @@ TEST(ServerConfig, NegativeUnsignedFlagsAreRefused) {
     EXPECT_EQ(std::get<ServerConfig>(o).cache_bytes, 1048576u);
 }
 
+// Byte options take the command line's size rule (K, M, G, T: powers of 1024), on the command
+// line and in the configuration file, and refuse anything else.
+TEST(ServerConfig, ByteSizesTakeSuffixes) {
+    auto o = load({"--cache-bytes", "160M", "--max-message-bytes", "64KiB"});
+    ASSERT_TRUE(std::holds_alternative<ServerConfig>(o));
+    EXPECT_EQ(std::get<ServerConfig>(o).cache_bytes, 160ull << 20);
+    EXPECT_EQ(std::get<ServerConfig>(o).limits.max_message_bytes, 64u << 10);
+    for (const char* bad : {"160Q", "nan", "inf", "-1M", "0", "M", "1e9"}) {
+        EXPECT_EQ(exit_code(load({"--cache-bytes", bad})), 2) << bad;
+    }
+    auto c = apply_json_config(
+        nlohmann::json::parse(R"({"cache-bytes": "1.5G", "max-message-bytes": "1M"})"),
+        ServerConfig{});
+    ASSERT_TRUE(c.ok()) << c.status().to_string();
+    EXPECT_EQ(c->cache_bytes, 3ull << 29);
+    EXPECT_EQ(c->limits.max_message_bytes, 1u << 20);
+    auto bad =
+        apply_json_config(nlohmann::json::parse(R"({"cache-bytes": "lots"})"), ServerConfig{});
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.status().message().find("cache-bytes"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace proxima::server

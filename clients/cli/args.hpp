@@ -1,0 +1,42 @@
+#pragma once
+// The command line's one argument layer (clients/cli/args.cpp): checks for numeric parameters
+// with messages in the project's words, byte sizes, and what a parse error does (one line, a
+// pointer to the subcommand's --help, exit status 2).
+
+#include <cstdint>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace proxima::cli {
+
+// Exit statuses (README "Exit status"): 0 success, 1 bad input or a failed operation (a bad mesh,
+// an unreachable daemon, an error status), 2 a usage error (an unknown option, a missing or
+// malformed argument, a value out of range).
+inline constexpr int EXIT_USAGE = 2;
+
+// A finite number (not nan or inf) of at least `lo`, or above it when `strict`.
+CLI::Validator finite_number(double lo, bool strict);
+inline CLI::Validator non_negative_number() {
+    return finite_number(0.0, false);
+}
+inline CLI::Validator positive_number() {
+    return finite_number(0.0, true);
+}
+// A whole number (digits only) from `lo` to `hi`.
+CLI::Validator whole_number(std::uint64_t lo, std::uint64_t hi);
+// A size as proxima::parse_size reads it (K, M, G, T powers of `base`: 1024 for bytes, 1000 for
+// counts of triangles), checked when the command line is parsed. As a transform() it also
+// rewrites the text to the whole number, for options parsed into an integer.
+CLI::Validator size_text(std::uint64_t base);
+
+// Parses the command line. Returns -1 when the command should run; otherwise the exit status:
+// 0 after --help or --version, EXIT_USAGE after a usage error, which is printed as
+// "proxima: error: MESSAGE" and a line naming the failing subcommand's --help.
+int parse_command_line(CLI::App& app, int argc, char** argv);
+
+// A usage error found after parsing (options that must come together): prints it as
+// parse_command_line does, naming `command`'s --help, and returns EXIT_USAGE.
+int usage_error(const CLI::App& command, const std::string& message);
+
+}  // namespace proxima::cli
