@@ -63,8 +63,11 @@ CLI::Validator whole_number(std::uint64_t lo, std::uint64_t hi) {
         "INTEGER " + range, "whole_number"};
 }
 
-CLI::Validator size_text(std::uint64_t base) {
-    return {[base](std::string& text) -> std::string {
+CLI::Validator size_text(std::uint64_t base, bool allow_zero) {
+    return {[base, allow_zero](std::string& text) -> std::string {
+                if (allow_zero && text == "0") {
+                    return {};
+                }
                 auto v = parse_size("", text, base);
                 if (!v.ok()) {
                     return "expected a positive number with an optional K, M, G or T suffix "

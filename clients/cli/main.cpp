@@ -666,7 +666,7 @@ int main(int argc, char** argv) {
             ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
                          "With --server: objects beyond this many bytes (in all) are uploaded "
                          "in chunks instead of inline")
-            ->transform(cli::size_text(1024))
+            ->transform(cli::size_text(1024, true))
             ->capture_default_str()
             ->needs(server_opt);
         distance->add_flag("--split-components", dist.split_components,
@@ -695,7 +695,9 @@ int main(int argc, char** argv) {
                          "choice)")
             ->check(cli::positive_number());
         distance->add_flag("--json", dist.json, "Print one JSON object");
-        distance->add_option("files", dist.files, "Mesh files (PLY, OFF, OBJ, STL, glTF/GLB)")
+        distance
+            ->add_option("files", dist.files,
+                         "Mesh files (PLY, OFF, OBJ, STL, glTF/GLB; each also .gz)")
             ->required();
 
         DemoArgs demo_args;

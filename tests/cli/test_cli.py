@@ -64,6 +64,27 @@ class Cli(unittest.TestCase):
         _, f = box_mesh((0, 0, 0), (1, 1, 1))
         return sum(1 for i in range(12) for j in range(i + 1, 12) if set(f[i]) & set(f[j]))
 
+    def test_gzip_compressed_files_answer_like_the_plain_ones(self):
+        import gzip
+        packed = [os.path.join(self.tmp, os.path.basename(p) + ".gz") for p in (self.a, self.two)]
+        for src, dst in zip((self.a, self.two), packed):
+            with open(src, "rb") as f, gzip.open(dst, "wb") as out:
+                out.write(f.read())
+        plain = self.distance("--split-components", "--self", self.a, self.two)
+        compressed = self.distance("--split-components", "--self", *packed)
+        self.assertEqual(strip_stats(compressed, ("objects",)), strip_stats(plain, ("objects",)))
+        for p, c in zip(plain["objects"], compressed["objects"]):
+            self.assertEqual({k: v for k, v in c.items() if k not in ("file", "name")},
+                             {k: v for k, v in p.items() if k not in ("file", "name")})
+        # Corrupt data is bad input (exit 1) naming the file, not a crash.
+        broken = os.path.join(self.tmp, "broken.off.gz")
+        with open(broken, "wb") as f:
+            f.write(b"\x1f\x8b" + b"\x00" * 40)
+        p = run("distance", broken)
+        self.assertEqual(p.returncode, 1, p.stderr)
+        self.assertIn("broken.off.gz", p.stderr)
+        self.assertIn("gzip data", p.stderr)
+
     def test_split_components_and_file_triangle_ids(self):
         doc = self.distance("--split-components", self.two)
         self.assertEqual(len(doc["objects"]), 2)

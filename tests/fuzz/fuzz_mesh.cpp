@@ -5,7 +5,9 @@
 // assimp (not instrumented: ASan sees its allocations, not its reads) restricted to its STL
 // importer, plus our conversion of its scene. OBJ has a target of its own, fuzz_mesh_obj.cpp. A
 // mesh that comes back must satisfy what the engine relies on: triangles, indices in range,
-// finite coordinates.
+// finite coordinates. Input that starts with the gzip magic (1f 8b) is decompressed first, under
+// every format (zlib, then the same readers; the corpus holds compressed PLY and OFF seeds); the
+// decompressed size is capped at 64 MiB here, so a bomb is an error, not an out-of-memory.
 
 #include <array>
 #include <cmath>
@@ -39,6 +41,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     proxima::MeshReadOptions options;
     // Welding on every other input: both paths must hold their promises.
     options.weld_identical_positions = (data[0] / FORMATS.size()) % 2 == 0;
+    options.max_uncompressed_bytes = std::uint64_t{64} << 20;
     const auto read = proxima::read_mesh_from_memory(bytes, format, "fuzz", options);
     if (!read.ok()) {
         check(read.status().message().find("fuzz") != std::string::npos, "errors name the file");

@@ -5,6 +5,7 @@ The committed corpus is these seeds plus what fuzzing found, minimized with libF
 (docs/reliability.md). Protobuf messages are encoded by hand (the wire format is simple and this
 keeps the script free of a protobuf dependency); field numbers are proto/proxima/v1/proxima.proto's.
 """
+import gzip
 import os
 import struct
 import sys
@@ -258,6 +259,11 @@ def mesh_seeds():
     yield "stl-binary", b"\x07" + stl_binary()
     yield "gltf", b"\x03" + gltf()
     yield "glb", b"\x04" + glb()
+    # gzip data under any format is decompressed first (mesh_io.cpp): a compressed PLY and OFF,
+    # and one cut short.
+    yield "ply-gz", b"\x00" + gzip.compress(ply_ascii(), mtime=0)
+    yield "off-gz", b"\x06" + gzip.compress(off(), mtime=0)
+    yield "ply-gz-truncated", b"\x00" + gzip.compress(ply_binary(False), mtime=0)[:-9]
 
 
 def mesh_obj_seeds():

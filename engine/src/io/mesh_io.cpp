@@ -21,6 +21,7 @@
 #include <assimp/Importer.hpp>
 
 #include "io/gltf.hpp"
+#include "io/gzip.hpp"
 #include "io/obj.hpp"
 #include "io/ply_off.hpp"
 
@@ -163,6 +164,12 @@ bool is_assimp_format(std::string_view format) {
     return std::find(ASSIMP_FORMATS.begin(), ASSIMP_FORMATS.end(), format) != ASSIMP_FORMATS.end();
 }
 
+// An extension some reader claims by name (no content detection needed).
+bool is_known_extension(const std::string& key) {
+    return key == "ply" || key == "off" || own_reader(key) != OwnReader::none ||
+           is_assimp_format(key);
+}
+
 // Serves the buffer under its own name only. assimp's MemoryIOSystem serves it under every name
 // that starts with its magic prefix (an OBJ read from memory was read as its own fall-back
 // material library, "<magic>.mtl", when OBJ still went through assimp).
@@ -282,6 +289,18 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
     }
     const std::string extension = lower(std::filesystem::path(path).extension().string());
     const std::string key = extension.empty() ? std::string() : extension.substr(1);
+    // gzip: by extension, or by its magic bytes under a name no reader claims. Decompressed in
+    // memory, then read as the file it holds (named by the extension before ".gz").
+    if (key == "gz" || (!is_known_extension(key) && detail::is_gzip(read_head(path)))) {
+        std::string packed;
+        if (Status s = read_file(path, packed); !s.ok()) {
+            return s;
+        }
+        const std::string inner =
+            key == "gz" ? lower(std::filesystem::path(path).stem().extension().string()) : "";
+        return read_mesh_from_memory(packed, inner.empty() ? "gz" : inner.substr(1) + ".gz", path,
+                                     options);
+    }
     // PLY, OFF, OBJ and glTF are read by our own readers, in double: Debian's assimp reads at
     // float precision. PLY and OFF are also recognised by content under any other extension
     // (frames without one).
@@ -341,6 +360,32 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
     std::string key = lower(format);
     if (key.starts_with('.')) {
         key.erase(0, 1);
+    }
+    const bool gz_format = key == "gz" || key.ends_with(".gz");
+    if (gz_format || detail::is_gzip(data)) {
+        if (gz_format) {
+            key.erase(key.size() - std::min<std::size_t>(key.size(), 3));  // "ply.gz" -> "ply"
+            if (key.ends_with('.')) {
+                key.pop_back();
+            }
+        }
+        auto unpacked = detail::gunzip(data, name, options.max_uncompressed_bytes);
+        if (!unpacked.ok()) {
+            return unpacked.status();
+        }
+        if (detail::is_gzip(unpacked.value())) {
+            return invalid_argument("mesh file '" + name +
+                                    "': gzip data holds gzip data again (compressed twice)");
+        }
+        if (key.empty()) {
+            // "gz" alone: PLY or OFF, recognised by content.
+            const auto content = detail::native_format_from_content(unpacked.value());
+            if (content == detail::NativeMeshFormat::none) {
+                return unsupported_format(name, "(gzip data that is neither PLY nor OFF)");
+            }
+            key = content == detail::NativeMeshFormat::ply ? "ply" : "off";
+        }
+        return read_mesh_from_memory(unpacked.value(), key, name, options);
     }
     if (key == "ply") {
         return finish(detail::read_ply(name, data), name, options);

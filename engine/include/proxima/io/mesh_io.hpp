@@ -2,7 +2,9 @@
 // Reading meshes from files. The engine sees only TriangleMesh: one indexed mesh per file.
 //
 // Formats: an allowlist, by extension (any case): PLY (ASCII, binary little and big endian), OFF
-// (ASCII), OBJ, STL (ASCII and binary), glTF 2.0 (.gltf, .glb; glTF 1.0 is refused). PLY and OFF
+// (ASCII), OBJ, STL (ASCII and binary), glTF 2.0 (.gltf, .glb; glTF 1.0 is refused), each also
+// gzip-compressed (".ply.gz": decompressed in memory, then the same reader; a .gltf.gz's external
+// buffers are not read). PLY and OFF
 // are also recognised by content under any other extension ("ply" first line, OFF keyword); every
 // other file is refused (invalid_argument naming the accepted formats), although the installed
 // assimp reads ~40 more: those importers are not fuzzed (tests/fuzz, docs/reliability.md), so no
@@ -17,6 +19,7 @@
 // buffers named relatively, beside the file or below it (read_mesh only). Material libraries
 // (.mtl) are never read.
 
+#include <cstdint>
 #include <string>
 #include <string_view>
 
@@ -30,6 +33,10 @@ struct MeshReadOptions {
     // corner (STL, and OBJ/PLY files whose corners carry distinct normals or texture coordinates)
     // lose their connectivity otherwise, and every neighbouring triangle would count as a contact.
     bool weld_identical_positions = true;
+    // gzip-compressed files (".ply.gz", or gzip data under any name) are decompressed in memory
+    // up to this many bytes, then read like the file they hold; past it the read fails (a
+    // decompression bomb stops here).
+    std::uint64_t max_uncompressed_bytes = std::uint64_t{4} << 30;
 };
 
 // Reads every triangle of the file, in file order within each mesh and mesh order within the
@@ -44,10 +51,13 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
 
 // The accepted formats, as error messages list them.
 inline constexpr std::string_view ACCEPTED_MESH_FORMATS =
-    ".ply, .off, .obj, .stl, .gltf, .glb (PLY and OFF also by content)";
+    ".ply, .off, .obj, .stl, .gltf, .glb, each also gzip-compressed (.ply.gz) (PLY and OFF also "
+    "by content)";
 
 // read_mesh on bytes already in memory; `format` is one of the accepted extensions, with or
-// without the dot, any case (no content detection), and `name` is used only in messages.
+// without the dot, any case (no content detection, except that gzip data, recognised by its magic
+// bytes or a format ending in ".gz", is decompressed first; "gz" alone detects PLY or OFF in what
+// it holds), and `name` is used only in messages.
 // Nothing else is read: files the data refers to (a .gltf's external buffers) are not found. The
 // fuzz target tests/fuzz/fuzz_mesh.cpp reads through this.
 StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
