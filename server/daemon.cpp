@@ -8,6 +8,7 @@
 #include <iterator>
 #include <utility>
 
+#include <grpc/support/log.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/pattern_formatter.h>
@@ -149,6 +150,17 @@ std::string log_message_json(std::string_view m) {
     return out.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
+// gRPC's own log lines (gpr_log) go through the daemon's logger, as debug lines: what matters
+// to an operator (a port in use, a refused call) the daemon reports itself, once, in its words;
+// gRPC's internal detail (a nested error tree for a failed bind) stays available with
+// --log-level debug.
+namespace {
+void log_grpc_line(gpr_log_func_args* args) {
+    spdlog::debug("grpc severity={} where={}:{} message=\"{}\"",
+                  gpr_log_severity_string(args->severity), args->file, args->line, args->message);
+}
+}  // namespace
+
 void configure_logging(const std::string& level, const std::string& format) {
     auto logger = spdlog::stderr_logger_mt("proximad");
     if (format == "json") {
@@ -160,6 +172,7 @@ void configure_logging(const std::string& level, const std::string& format) {
     logger->set_level(spdlog::level::from_str(level));
     logger->flush_on(spdlog::level::trace);
     spdlog::set_default_logger(std::move(logger));
+    gpr_set_log_function(log_grpc_line);
 }
 
 Daemon::Daemon(ServerConfig config)

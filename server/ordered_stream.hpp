@@ -96,7 +96,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
     void OnCancel() final {
         std::lock_guard lock(mutex());
         m_cancelled = true;
-        m_cancel.cancel();
+        end_by_client(m_cancel);
         on_closing_locked();
         drop_requests_locked();
         maybe_finish_locked();
@@ -112,7 +112,15 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         const std::string extra = log_extra();
         on_done();
         m_shared.leave_call(this);
-        log_call(m_shared, m_method, m_admission.who(), m_peer, subject, m_start, m_final, extra,
+        // The status the client saw: a stream whose client went away (cancelled it, was killed,
+        // ran out of time) before its status was sent is logged as such, even when the daemon had
+        // taken the end of its reads for a half-close and finished with OK.
+        Status logged = m_final;
+        if (logged.ok() && m_context->IsCancelled()) {
+            end_by_client(m_cancel);
+            logged = stop_status(m_cancel, m_what);
+        }
+        log_call(m_shared, m_method, m_admission.who(), m_peer, subject, m_start, logged, extra,
                  spdlog::level::info);
         delete this;
     }
@@ -150,7 +158,6 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
                 m_error = s;
             }
         }
-        m_context = nullptr;  // not needed after the constructor
         start_read_if_room_locked();
         maybe_finish_locked();
     }
@@ -329,7 +336,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         }
     }
 
-    grpc::CallbackServerContext* m_context;  // until open()
+    grpc::CallbackServerContext* const m_context;  // gRPC's, valid until OnDone returns
     const char* const m_method;
     const std::string m_what;
 

@@ -141,6 +141,20 @@ inline void apply_deadline(CancelToken& token, const grpc::CallbackServerContext
     token.set_deadline(Clock::now() + std::chrono::duration_cast<Clock::duration>(deadline - now));
 }
 
+// A call's end notice from gRPC (OnCancel): the client cancelled it, vanished, or its deadline
+// passed. A client's own deadline reaches the daemon as a cancellation (its library resets the
+// stream when its time is up), a moment before or after the daemon's timer for the same deadline:
+// a notice within 50 ms of the deadline is the deadline (DEADLINE_EXCEEDED in the log and the
+// metrics), anything earlier a cancellation.
+inline void end_by_client(CancelToken& token) {
+    constexpr auto MARGIN = std::chrono::milliseconds(50);
+    if (token.has_deadline() && Clock::now() + MARGIN >= token.deadline()) {
+        token.expire();
+    } else {
+        token.cancel();
+    }
+}
+
 // Exceptions never cross into gRPC: the engine throws only for bugs and exhausted memory.
 template <class Fn>
 Status guarded(Fn&& fn) {
@@ -315,7 +329,7 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
         Finish(wire::to_grpc(status));
     }
 
-    void OnCancel() override { m_cancel.cancel(); }
+    void OnCancel() override { end_by_client(m_cancel); }
     void OnDone() override {
         m_shared.leave_call();
         delete this;

@@ -80,7 +80,7 @@ class VerifyReactor final : public grpc::ServerWriteReactor<v1::VerifyModelEvent
     void OnCancel() override {
         std::lock_guard lock(m_mu);
         m_cancelled = true;
-        m_cancel.cancel();
+        end_by_client(m_cancel);
         m_room.notify_all();
         write_next_locked();
     }

@@ -14,7 +14,7 @@ PROXIMA = sys.argv[1] if len(sys.argv) > 1 else "proxima"
 PROXIMAD = sys.argv[2] if len(sys.argv) > 2 else "proximad"
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
-from cli_helpers import box_mesh, run_program, write_off  # noqa: E402
+from cli_helpers import Daemon, box_mesh, run_program, write_off  # noqa: E402
 
 
 class Arguments(unittest.TestCase):
@@ -125,6 +125,22 @@ class Arguments(unittest.TestCase):
         self.assertNotIn("cache-bytes", p.stderr)
         self.assertIn("limits must be at least 1", p.stderr)
 
+
+    def test_a_port_in_use_is_one_clean_line(self):
+        daemon = Daemon(PROXIMAD, "--gpu", "off")
+        try:
+            p = run_program(PROXIMAD, "--listen", daemon.address, "--gpu", "off")
+            self.assertEqual(p.returncode, 1)
+            lines = p.stderr.strip().splitlines()
+            self.assertEqual(len(lines), 1, "gRPC's internal error tree is not printed: " + p.stderr)
+            self.assertIn("cannot listen on " + daemon.address, lines[0])
+            self.assertIn("port in use", lines[0])
+            # Still there for whoever asks for debug lines.
+            p = run_program(PROXIMAD, "--listen", daemon.address, "--gpu", "off", "--log-level",
+                            "debug")
+            self.assertIn("Address already in use", p.stderr)
+        finally:
+            daemon.stop()
 
 if __name__ == "__main__":
     unittest.main(argv=sys.argv[:1], verbosity=2)

@@ -14,6 +14,7 @@
 #include <regex>
 #include <sstream>
 #include <string>
+#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -145,6 +146,56 @@ TEST(Metrics, PrometheusEndpointCountsCallsFramesQuotasAndState) {
     // The GPU backend's state is always there (1 on llvmpipe, 0 where EGL cannot start).
     EXPECT_GE(metric(text, "proxima_gpu_active"), 0);
     EXPECT_GE(metric(text, "proxima_dvd_kernel_seconds_total", {{"backend", "cpu"}}), 0);
+}
+
+// Issue #18: a stream whose client cancels it (or whose deadline passes) while the daemon is
+// idle was logged and counted status=OK (the end of its reads read as a half-close). The log line
+// and the metric now carry what the client saw.
+TEST(Metrics, StreamsEndedByTheClientAreCountedAsSuch) {
+    DaemonProcess daemon({"--metrics-listen", "127.0.0.1:0"});
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    const auto second = daemon.next_line(5s);
+    ASSERT_TRUE(second.has_value());
+    const std::string address = second->substr(std::string("metrics on ").size());
+    auto stub = make_stub(daemon.address());
+    const auto scene = create_scene(*stub, "", "a", 2);
+    ASSERT_FALSE(scene.empty());
+
+    {  // Cancelled after one answered frame.
+        auto context = context_for("");
+        auto stream = stub->StreamFrames(context.get());
+        ASSERT_TRUE(stream->Write(separation_frame(scene, 1)));
+        v1::FrameResult result;
+        ASSERT_TRUE(stream->Read(&result));
+        context->TryCancel();
+        EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+    }
+    {  // Idle past its deadline.
+        auto context = context_for("", 1500ms);
+        auto stream = stub->StreamFrames(context.get());
+        ASSERT_TRUE(stream->Write(separation_frame(scene, 1)));
+        v1::FrameResult result;
+        ASSERT_TRUE(stream->Read(&result));
+        std::this_thread::sleep_for(2500ms);
+        EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+    }
+    std::string text;
+    for (int i = 0; i < 100; ++i) {
+        text = http_get_metrics(address);
+        if (metric(text, "proxima_requests_total",
+                   {{"method", "StreamFrames"}, {"code", "DEADLINE_EXCEEDED"}}) == 1) {
+            break;
+        }
+        std::this_thread::sleep_for(20ms);
+    }
+    EXPECT_EQ(
+        metric(text, "proxima_requests_total", {{"method", "StreamFrames"}, {"code", "CANCELLED"}}),
+        1);
+    EXPECT_EQ(metric(text, "proxima_requests_total",
+                     {{"method", "StreamFrames"}, {"code", "DEADLINE_EXCEEDED"}}),
+              1);
+    EXPECT_EQ(metric(text, "proxima_requests_total", {{"method", "StreamFrames"}, {"code", "OK"}}),
+              -1);
 }
 
 TEST(Logs, JsonMessagesKeepEveryKeyAndTypedValues) {
