@@ -15,10 +15,14 @@
 // numbers "x y z", a translation. Numbers are separated by spaces, tabs or commas; empty lines
 // and lines starting with '#' are skipped.
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -527,6 +531,17 @@ int run_review_local(const ReviewArgs& args, const TriangleMesh& avatar,
     return 0;
 }
 
+// USER@HOST-PID: two reviewers (or two runs of one) never clash on the default name.
+std::string default_member_name() {
+    const char* user = std::getenv("USER");
+    std::array<char, 256> host{};
+    if (gethostname(host.data(), host.size() - 1) != 0) {
+        host[0] = '\0';
+    }
+    return std::string(user != nullptr && *user != '\0' ? user : "proxima") + "@" +
+           (host[0] != '\0' ? host.data() : "localhost") + "-" + std::to_string(getpid());
+}
+
 int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
                       const std::vector<massive::Affine>& poses) {
     auto c = connect(args.server, args.server_flags);
@@ -542,6 +557,12 @@ int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
     join.nearest = !args.no_nearest;
     auto session = c.value()->join_review(join);
     if (!session.ok()) {
+        if (session.status().code() == StatusCode::failed_precondition &&
+            session.status().message().find("already has a member named") != std::string::npos) {
+            return fail(Status(
+                session.status().code(),
+                session.status().message() + "; join under another name with --member NAME"));
+        }
         return fail(session.status());
     }
     auto& review = *session.value();
@@ -711,9 +732,10 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     review_args->room = "review";
     review
         ->add_option("--member", review_args->member,
-                     "With --server: this member's name in the room (default: proxima-cli)")
+                     "With --server: this member's name in the room (default: USER@HOST-PID, "
+                     "unique per client)")
         ->needs(review_server);
-    review_args->member = "proxima-cli";
+    review_args->member = default_member_name();
     review->add_option("--avatar", review_args->avatar, "The avatar's mesh file (any format)")
         ->required()
         ->check(CLI::ExistingFile);

@@ -189,6 +189,10 @@ class MassiveCli(unittest.TestCase):
             self.assertEqual(strip_stats(remote), strip_stats(local))
             self.assertEqual(remote["room"], "cli")
             self.assertEqual(remote["latency_ms"]["poses"], 13)
+            # Without --member: a name of its own (USER@HOST-PID), so two reviewers never clash.
+            unnamed = self.json_of("review", "--server", address, "--model", "row", "--avatar",
+                                   self.avatar, "--path", self.path, "--room", "cli", "--quiet")
+            self.assertRegex(unnamed["member"], r"^[^@]+@[^@]+-\d+$")
             p = run(PROXIMA, "verify", "--server", address, "--model", "nope", "--tolerance", "0")
             self.assertEqual(p.returncode, 1)
             self.assertIn("NOT_FOUND", p.stderr)
