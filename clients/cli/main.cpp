@@ -503,6 +503,16 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
     print_demo_header(args, scene);
     std::vector<double> engine_ms;
     std::vector<double> rtt_ms;
+    // A broken stream names the daemon and how far the frames got, not only gRPC's words
+    // ("UNAVAILABLE: Socket closed").
+    auto broken = [&](const Status& st, std::size_t frame) {
+        const std::string answered = frame == 0
+                                         ? "no frame answered yet"
+                                         : "last frame answered: " + std::to_string(frame - 1);
+        return fail(Status(st.code(), st.message() + " (stream to the daemon at " + args.server +
+                                          " broke at frame " + std::to_string(frame) + "; " +
+                                          answered + ")"));
+    };
     for (std::size_t k = 0; k < scene.frame_count; ++k) {
         SceneUpdate local_update;
         if (k == 0) {
@@ -525,11 +535,11 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
         }
         const auto start = std::chrono::steady_clock::now();
         if (auto sent = frames.send(frame); !sent.ok()) {
-            return fail(sent);
+            return broken(sent, k);
         }
         auto response = frames.receive();
         if (!response.ok()) {
-            return fail(response.status());
+            return broken(response.status(), k);
         }
         const double round_trip_ms = milliseconds_since(start);
         if (auto st = ids.update(local_update, applied.value(), response.value()); !st.ok()) {
@@ -546,7 +556,7 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
         rtt_ms.push_back(round_trip_ms);
     }
     if (auto st = frames.finish(); !st.ok()) {
-        return fail(st);
+        return broken(st, scene.frame_count);
     }
     print_demo_spread(args, "engine time", engine_ms);
     print_demo_spread(args, "round trip", rtt_ms);

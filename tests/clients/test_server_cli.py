@@ -245,6 +245,34 @@ class ServerCli(unittest.TestCase):
         self.assertTrue(lines[5].startswith("engine time per frame, frames 1..1: median"), lines[5])
         self.assertIn("p99/median", lines[6])
 
+    def test_a_daemon_dying_mid_stream_is_named(self):
+        # Issue #18: "UNAVAILABLE: Socket closed" named neither the daemon nor the last frame.
+        daemon = Daemon("--gpu", "off")
+        demo = subprocess.Popen([ARGS.proxima, "demo", "--server", daemon.address, "--scene",
+                                 "cloth-ball", "--frames", "100000"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            frames = 0
+            for line in demo.stdout:
+                if re.match(r"^\s*\d+\s+\d+\s+\d+", line):
+                    frames += 1
+                    if frames == 3:
+                        break
+            self.assertEqual(frames, 3, "the demo answered no frames")
+            daemon.proc.kill()
+            daemon.proc.wait()
+            _, err = demo.communicate(timeout=60)
+        finally:
+            if demo.poll() is None:
+                demo.kill()
+                demo.wait()
+            daemon.proc.stdout.close()
+            daemon.close()
+        self.assertEqual(demo.returncode, 1, err)
+        self.assertIn("UNAVAILABLE", err)
+        self.assertIn("stream to the daemon at " + daemon.address + " broke at frame", err)
+        self.assertRegex(err, r"last frame answered: \d+\)")
+
     def test_info(self):
         info = self.json_of("info", "--server", self.daemon.address, "--json")
         self.assertEqual(info["api"], "proxima.v1")
