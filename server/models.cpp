@@ -121,10 +121,20 @@ Status ModelRegistry::rescan() {
         entry->store = std::move(store).value();
         entry->box = model_box(*entry->store);
         const auto& s = entry->store->summary();
-        spdlog::info(
-            "model {} name={} generation={} objects={} pieces={} triangles={} chunk_bytes={}",
-            m_models.count(name) != 0 ? "reopened" : "opened", name, s.generation, s.objects,
-            s.pieces, s.triangles, s.bytes);
+        if (auto old = m_models.find(name); old != m_models.end()) {
+            // A re-import replaced the store under a served name: calls from now on see the new
+            // generation; rooms and verifications already running keep the one they opened.
+            spdlog::info(
+                "model switched name={} from_generation={} to_generation={} objects={} pieces={} "
+                "triangles={} bytes={}",
+                name, old->second->store->summary().generation, s.generation, s.objects, s.pieces,
+                s.triangles, s.bytes);
+        } else {
+            spdlog::info(
+                "model opened name={} generation={} objects={} pieces={} triangles={} "
+                "bytes={}",
+                name, s.generation, s.objects, s.pieces, s.triangles, s.bytes);
+        }
         m_unavailable.erase(name);
         m_models[name] = std::move(entry);
     }

@@ -110,6 +110,19 @@ int run_import(const ImportArgs& args) {
         options.source = "plant " + std::to_string(triangles.value()) + " triangles seed " +
                          std::to_string(args.seed);
     }
+    // Importing over an existing store replaces it (a new generation; the old one is kept until
+    // the next import): say so, since a daemon serving the directory switches to it.
+    std::string replaced;
+    if (auto existing = massive::Store::open(args.store); existing.ok()) {
+        const auto& old = existing.value()->summary();
+        replaced = old.generation;
+        std::fprintf(stderr,
+                     "proxima: replacing generation %s of %s (%llu objects, %llu triangles); a "
+                     "proximad serving it switches to the new one at its next rescan\n",
+                     old.generation.c_str(), args.store.c_str(),
+                     static_cast<unsigned long long>(old.objects),
+                     static_cast<unsigned long long>(old.triangles));
+    }
     const auto start = std::chrono::steady_clock::now();
     client::ProgressPrinter printer(args.quiet);
     auto summary = args.plant.empty()
@@ -125,6 +138,9 @@ int run_import(const ImportArgs& args) {
     doc["max_piece_bytes"] = options.max_piece_bytes;
     doc["chunk_bytes"] = options.chunk_bytes;
     doc["source"] = options.source;
+    if (!replaced.empty()) {
+        doc["replaced_generation"] = replaced;
+    }
     doc["seconds"] = seconds;
     doc["triangles_per_second"] =
         seconds > 0 ? static_cast<double>(summary->triangles) / seconds : 0.0;

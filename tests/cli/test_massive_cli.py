@@ -166,6 +166,36 @@ class MassiveCli(unittest.TestCase):
         self.assertIn("--cache-bytes: expected a positive number", p.stderr)
 
     @unittest.skipUnless(PROXIMAD, "no proximad given")
+    def test_reimport_over_a_served_model_is_said(self):
+        # Issue #18: re-importing replaced a served model without a word.
+        models = os.path.join(self.tmp, "reimport")
+        store = os.path.join(models, "box")
+        box = os.path.join(self.tmp, "one-box.off")
+        write_off_one(box, box_mesh((0, 0, 0), (1, 1, 1)))
+        first = run(PROXIMA, "import", "--store", store, "--quiet", box)
+        self.assertEqual(first.returncode, 0, first.stderr)
+        self.assertNotIn("replacing", first.stderr)
+        generation = json.loads(first.stdout)["generation"]
+        daemon = Daemon(PROXIMAD, "--models", models, "--gpu", "off")
+        try:
+            self.assertEqual(run(PROXIMA, "models", "--server", daemon.address).returncode, 0)
+            again = run(PROXIMA, "import", "--store", store, "--quiet", box)
+            self.assertEqual(again.returncode, 0, again.stderr)
+            self.assertIn(f"replacing generation {generation} of {store}", again.stderr)
+            self.assertIn("switches to the new one at its next rescan", again.stderr)
+            doc = json.loads(again.stdout)
+            self.assertEqual(doc["replaced_generation"], generation)
+            self.assertNotEqual(doc["generation"], generation)
+            # Listing rescans: the daemon logs the switch, both generations named.
+            self.assertEqual(run(PROXIMA, "models", "--server", daemon.address).returncode, 0)
+        finally:
+            daemon.stop()
+            log = daemon.log()
+            daemon.close()
+        self.assertIn(f"model switched name=box from_generation={generation} "
+                      f"to_generation={doc['generation']}", log)
+
+    @unittest.skipUnless(PROXIMAD, "no proximad given")
     def test_server_equals_local(self):
         daemon = Daemon(PROXIMAD, "--models", self.models, "--cache-bytes", str(256 * 1024),
                         "--gpu", "off", "--log-level", "warn")
