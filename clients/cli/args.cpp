@@ -101,6 +101,34 @@ std::string top_name(const CLI::App& command) {
 
 }  // namespace
 
+void add_json_output(CLI::App& cmd, JsonOutput& output, bool always) {
+    cmd.add_flag("--json", output.json,
+                 always ? "Print the JSON result on standard output (the default)"
+                        : "Print the result as one JSON object on standard output");
+    cmd.add_option("--out", output.out,
+                   "Write the JSON result to FILE instead (a one-line summary on standard error)")
+        ->type_name("FILE");
+}
+
+int emit_json(const nlohmann::json& doc, const JsonOutput& output, const std::string& summary) {
+    const std::string text = doc.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+    if (output.out.empty()) {
+        std::fwrite(text.data(), 1, text.size(), stdout);
+        std::fputc('\n', stdout);
+        return 0;
+    }
+    std::FILE* file = std::fopen(output.out.c_str(), "wb");
+    const bool ok = file != nullptr &&
+                    std::fwrite(text.data(), 1, text.size(), file) == text.size() &&
+                    std::fputc('\n', file) != EOF;
+    if (file == nullptr || std::fclose(file) != 0 || !ok) {
+        std::fprintf(stderr, "proxima: error: cannot write '%s'\n", output.out.c_str());
+        return 1;
+    }
+    std::fprintf(stderr, "%s; JSON in %s\n", summary.c_str(), output.out.c_str());
+    return 0;
+}
+
 int usage_error(const CLI::App& command, const std::string& message) {
     std::fprintf(stderr, "%s: error: %s\nRun '%s --help' for the options.\n",
                  top_name(command).c_str(), message.c_str(), command_path(command).c_str());

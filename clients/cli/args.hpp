@@ -7,6 +7,7 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 namespace proxima::cli {
 
@@ -35,6 +36,21 @@ CLI::Validator size_text(std::uint64_t base, bool allow_zero = false);
 // 0 after --help or --version, EXIT_USAGE after a usage error, which is printed as
 // "proxima: error: MESSAGE" and a line naming the failing subcommand's --help.
 int parse_command_line(CLI::App& app, int argc, char** argv);
+
+// One output convention for every command that prints one JSON document: --json prints it on
+// standard output (one line), --out FILE writes it to FILE instead and prints a one-line summary
+// on standard error.
+struct JsonOutput {
+    bool json = false;
+    std::string out;
+    bool wanted() const { return json || !out.empty(); }
+};
+// Adds --json and --out FILE to `cmd`. `always`: the command prints nothing but JSON (--json is
+// accepted for the convention's sake).
+void add_json_output(CLI::App& cmd, JsonOutput& output, bool always = false);
+// Prints or writes `doc` as JsonOutput says; `summary` is the stderr line after writing a file.
+// Returns the exit status: 0, or 1 when the file cannot be written.
+int emit_json(const nlohmann::json& doc, const JsonOutput& output, const std::string& summary);
 
 // A usage error found after parsing (options that must come together): prints it as
 // parse_command_line does, naming `command`'s --help, and returns EXIT_USAGE.

@@ -30,7 +30,7 @@ struct CcdArgs {
     ServerFlags server_flags;
     bool split_components = false;
     double min_distance = 0.0;
-    bool json = false;
+    JsonOutput output;
     std::vector<std::string> files;
 };
 
@@ -94,10 +94,10 @@ StatusOr<Frames> load_frames(const CcdArgs& args) {
 // objects in file order (or by connected component with --split-components); a vf primitive is a
 // vertex and other_primitive a triangle of the objects' meshes; ee primitives are edge indices
 // (the sorted unique vertex pairs of an object's triangles).
-void print_ccd_result(const std::vector<client::InputObject>& objects, const ccd::CcdResult& r,
-                      bool json) {
+int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd::CcdResult& r,
+                     const JsonOutput& output) {
     const auto& st = r.stats;
-    if (json) {
+    if (output.wanted()) {
         nlohmann::json doc;
         doc["objects"] = nlohmann::json::array();
         for (const auto& o : objects) {
@@ -131,8 +131,9 @@ void print_ccd_result(const std::vector<client::InputObject>& objects, const ccd
                         {"broad_phase_seconds", st.broad_phase_seconds},
                         {"narrow_phase_seconds", st.narrow_phase_seconds},
                         {"total_seconds", st.total_seconds}};
-        std::cout << doc.dump() << '\n';
-        return;
+        return emit_json(doc, output,
+                         "ccd: " + std::to_string(r.pairs.size()) + " colliding pairs among " +
+                             std::to_string(objects.size()) + " objects");
     }
     auto name = [&](std::uint32_t i) {
         return i < objects.size() ? objects[i].mesh.name : "object " + std::to_string(i);
@@ -168,6 +169,7 @@ void print_ccd_result(const std::vector<client::InputObject>& objects, const ccd
         static_cast<unsigned long long>(st.brute_force_tests),
         static_cast<unsigned long long>(st.capped_tests), st.broad_phase_seconds * 1e3,
         st.narrow_phase_seconds * 1e3, st.total_seconds * 1e3);
+    return 0;
 }
 
 StatusOr<ccd::CcdResult> ccd_local(const Frames& frames, const ccd::CcdRequest& request) {
@@ -221,8 +223,7 @@ int run_ccd(const CcdArgs& args) {
     if (!result.ok()) {
         return fail(result.status());
     }
-    print_ccd_result(frames->objects, result.value(), args.json);
-    return 0;
+    return print_ccd_result(frames->objects, result.value(), args.output);
 }
 
 }  // namespace
@@ -245,7 +246,7 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
                     "Report contact when primitives come within this distance")
         ->check(non_negative_number())
         ->capture_default_str();
-    cmd->add_flag("--json", args->json, "Print one JSON object");
+    add_json_output(*cmd, args->output);
     cmd->add_option("files", args->files, "T0_FILE T1_FILE: the two frames (any mesh format)")
         ->required()
         ->expected(2);

@@ -32,7 +32,7 @@ namespace {
 
 struct CcdQueriesArgs {
     std::string kind;
-    bool json = false;
+    JsonOutput output;
     double min_distance = 0.0;
     double tolerance = ccd::ElementaryOptions{}.tolerance;
     std::uint32_t max_boxes = ccd::ElementaryOptions{}.max_boxes;
@@ -128,7 +128,7 @@ int run_ccd_queries(const CcdQueriesArgs& args) {
         mixed = mixed || f.kind != files.front().kind;
     }
     const bool have_truth = all.with_truth > 0;
-    if (args.json) {
+    if (args.output.wanted()) {
         nlohmann::json j = {{"results", std::move(results)},
                             {"toi", std::move(tois)},
                             {"false_negatives",
@@ -140,8 +140,9 @@ int run_ccd_queries(const CcdQueriesArgs& args) {
                             {"capped", all.capped},
                             {"queries", all.queries},
                             {"kind", mixed ? "mixed" : ccd::ccd_kind_name(files.front().kind)}};
-        std::cout << j.dump() << '\n';
-        return 0;
+        return emit_json(j, args.output,
+                         "ccd-queries: " + std::to_string(all.queries) + " queries, " +
+                             std::to_string(all.hits) + " reported in contact");
     }
     for (const auto& f : files) {
         std::printf("%s: %zu %s queries, %zu reported in contact", f.path.c_str(), f.queries,
@@ -178,7 +179,7 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code) {
                     "vf (vertex-face) or ee (edge-edge); default: from the path "
                     "('vertex-face' / 'edge-edge')")
         ->check(CLI::IsMember({"vf", "ee"}));
-    cmd->add_flag("--json", args->json, "Print one JSON object");
+    add_json_output(*cmd, args->output);
     cmd->add_option("--min-distance", args->min_distance,
                     "Report contact when the primitives come within this distance")
         ->check(non_negative_number())

@@ -54,7 +54,7 @@ struct DistanceArgs {
     bool self = false;
     bool collisions = false;
     bool pns = false;
-    bool json = false;
+    cli::JsonOutput output;
     double tolerance = -1.0;
     bool penetration = false;
     std::string culler = "auto";
@@ -261,16 +261,17 @@ int run_distance(const DistanceArgs& args) {
         return fail(answer.status());
     }
     const auto& result = answer->result;
-    if (args.json) {
+    if (args.output.wanted()) {
         client::OutputOptions opts{args.self, request.collisions, args.tolerance >= 0.0, args.pns};
         auto j = client::distance_json(objects.value(), result, opts);
         if (args.penetration) {
             j["penetrations"] = client::penetrations_json(objects.value(), answer->penetrations);
         }
-        std::cout << j.dump() << '\n';
-    } else {
-        print_text(objects.value(), result, answer->penetrations, args);
+        return cli::emit_json(j, args.output,
+                              "distance: " + std::to_string(objects->size()) + " objects, " +
+                                  std::to_string(result.stats.exact_tests) + " exact tests");
     }
+    print_text(objects.value(), result, answer->penetrations, args);
     return 0;
 }
 
@@ -584,7 +585,7 @@ int run_demo(const DemoArgs& args) {
 struct InfoArgs {
     std::string server;
     cli::ServerFlags server_flags;
-    bool json = false;
+    cli::JsonOutput output;
 };
 
 int run_info(const InfoArgs& args) {
@@ -597,7 +598,7 @@ int run_info(const InfoArgs& args) {
         return fail(info.status());
     }
     const auto& i = info.value();
-    if (args.json) {
+    if (args.output.wanted()) {
         nlohmann::json j = {{"address", args.server},
                             {"version", i.version},
                             {"api", i.api},
@@ -620,8 +621,7 @@ int run_info(const InfoArgs& args) {
                               {"max_bytes_in_flight", i.quota_max_bytes_in_flight},
                               {"max_frames_per_second", i.quota_max_frames_per_second},
                               {"max_streams", i.quota_max_streams}}}};
-        std::cout << j.dump() << '\n';
-        return 0;
+        return cli::emit_json(j, args.output, "info: proximad " + i.version + " at " + args.server);
     }
     std::printf("proximad %s at %s (api %s)\n", i.version.c_str(), args.server.c_str(),
                 i.api.c_str());
@@ -704,7 +704,7 @@ int main(int argc, char** argv) {
                          "Voronoi cullers: grid cell size in scene units (default: the engine's "
                          "choice)")
             ->check(cli::positive_number());
-        distance->add_flag("--json", dist.json, "Print one JSON object");
+        cli::add_json_output(*distance, dist.output);
         distance
             ->add_option("files", dist.files,
                          "Mesh files (PLY, OFF, OBJ, STL, glTF/GLB; each also .gz)")
@@ -731,7 +731,7 @@ int main(int argc, char** argv) {
         auto* info = app.add_subcommand("info", "Show a proximad daemon's version and limits");
         info->add_option("--server", info_args.server, "The daemon's HOST:PORT")->required();
         cli::add_server_flags(*info, info_args.server_flags);
-        info->add_flag("--json", info_args.json, "Print one JSON object");
+        cli::add_json_output(*info, info_args.output);
 
         int command_exit = -1;
         cli::add_ccd_command(app, command_exit);

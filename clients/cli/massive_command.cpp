@@ -5,10 +5,10 @@
 //
 //   proxima models --server ADDR [--json]
 //   proxima verify (--store DIR | --server ADDR --model NAME) --tolerance D [--cache-bytes M]
-//                  [--brute-force] [--json FILE] [--quiet]
+//                  [--brute-force] [--json | --out FILE] [--quiet]
 //   proxima review (--store DIR | --server ADDR --model NAME) --avatar MESHFILE --path PATHFILE
 //                  [--room R] [--member NAME] [--tolerance D] [--no-nearest] [--cache-bytes M]
-//                  [--json FILE] [--quiet]
+//                  [--json | --out FILE] [--quiet]
 //
 // A path file has one avatar pose per line: 12 numbers, the row-major 3x4 affine map
 // (a00 a01 a02 tx a10 a11 a12 ty a20 a21 a22 tz) applied to the avatar's own coordinates, or 3
@@ -59,18 +59,15 @@ StatusOr<std::unique_ptr<client::Client>> connect(const std::string& address,
 }
 
 // Writes `doc` to `file`, or to standard output when `file` is empty.
-Status write_json(const nlohmann::json& doc, const std::string& file) {
-    if (file.empty()) {
-        std::cout << doc.dump() << '\n';
-        return {};
-    }
-    std::ofstream out(file, std::ios::trunc);
-    out << doc.dump(2) << '\n';
-    out.close();
-    if (!out) {
-        return {StatusCode::unavailable, "cannot write " + file};
-    }
-    return {};
+// The one-line summaries after --out FILE.
+std::string verify_summary(const nlohmann::json& doc) {
+    return "verify: " + std::to_string(doc["pairs"].size()) + " object pairs within " +
+           doc["tolerance"].dump();
+}
+std::string review_summary(const nlohmann::json& doc) {
+    const auto& latency = doc["latency_ms"];
+    return "review: " + std::to_string(doc["poses"].size()) + " poses" +
+           (latency.contains("p99") ? ", p99 " + latency["p99"].dump() + " ms" : std::string());
 }
 
 nlohmann::json vec_json(const Vec3& v) {
@@ -97,7 +94,7 @@ nlohmann::json cache_json(const massive::CacheStats& c) {
 struct ModelsArgs {
     std::string server;
     ServerFlags server_flags;
-    bool json = false;
+    JsonOutput output;
 };
 
 int run_models(const ModelsArgs& args) {
@@ -110,7 +107,7 @@ int run_models(const ModelsArgs& args) {
         return fail(list.status());
     }
     const auto& l = list.value();
-    if (args.json) {
+    if (args.output.wanted()) {
         nlohmann::json models = nlohmann::json::array();
         for (const auto& m : l.models) {
             models.push_back({{"name", m.name},
@@ -133,8 +130,9 @@ int run_models(const ModelsArgs& args) {
                               {"models", models},
                               {"unavailable", unavailable},
                               {"cache", cache_json(l.cache)}};
-        std::cout << doc.dump() << '\n';
-        return 0;
+        return emit_json(
+            doc, args.output,
+            "models: " + std::to_string(l.models.size()) + " served by " + args.server);
     }
     if (l.models_dir.empty()) {
         std::printf("proximad at %s serves no models (start it with --models DIR)\n",
@@ -173,7 +171,7 @@ struct VerifyArgs {
     double tolerance = 0.0;
     std::string cache_bytes;
     bool brute_force = false;
-    std::string json_file;
+    JsonOutput output;
     bool quiet = false;
 };
 
@@ -274,10 +272,7 @@ int run_verify_local(const VerifyArgs& args, std::uint64_t cache_bytes) {
         doc["stats"]["wall_seconds"] = seconds_since(start);
     }
     doc["pairs"] = found.json();
-    if (Status s = write_json(doc, args.json_file); !s.ok()) {
-        return fail(s);
-    }
-    return 0;
+    return emit_json(doc, args.output, verify_summary(doc));
 }
 
 int run_verify_remote(const VerifyArgs& args) {
@@ -310,10 +305,7 @@ int run_verify_remote(const VerifyArgs& args) {
     doc["stats"]["server_seconds"] = summary->server_seconds;
     doc["stats"]["wall_seconds"] = seconds_since(start);
     doc["pairs"] = found.json();
-    if (Status s = write_json(doc, args.json_file); !s.ok()) {
-        return fail(s);
-    }
-    return 0;
+    return emit_json(doc, args.output, verify_summary(doc));
 }
 
 int run_verify(const VerifyArgs& args) {
@@ -357,7 +349,7 @@ struct ReviewArgs {
     double tolerance = 0.0;
     bool no_nearest = false;
     std::string cache_bytes;
-    std::string json_file;
+    JsonOutput output;
     bool quiet = false;
 };
 
@@ -525,10 +517,7 @@ int run_review_local(const ReviewArgs& args, const TriangleMesh& avatar,
                           {"poses", out},
                           {"latency_ms", latency_json(latencies)},
                           {"cache", cache_json(view->cache()->stats())}};
-    if (Status s = write_json(doc, args.json_file); !s.ok()) {
-        return fail(s);
-    }
-    return 0;
+    return emit_json(doc, args.output, review_summary(doc));
 }
 
 // USER@HOST-PID: two reviewers (or two runs of one) never clash on the default name.
@@ -620,10 +609,7 @@ int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
                           {"latency_ms", latency_json(latencies)},
                           {"peer_updates", peer_updates},
                           {"edits_seen", edits_seen}};
-    if (Status s = write_json(doc, args.json_file); !s.ok()) {
-        return fail(s);
-    }
-    return 0;
+    return emit_json(doc, args.output, review_summary(doc));
 }
 
 int run_review(const ReviewArgs& args) {
@@ -668,14 +654,14 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
         "models", "List the massive models a proximad daemon serves, and its cache counters");
     models->add_option("--server", models_args->server, "The daemon's HOST:PORT")->required();
     add_server_flags(*models, models_args->server_flags);
-    models->add_flag("--json", models_args->json, "Print one JSON object");
+    add_json_output(*models, models_args->output);
     models->callback([models_args, &exit_code] { exit_code = run_models(*models_args); });
 
     auto verify_args = std::make_shared<VerifyArgs>();
     auto* verify = app.add_subcommand(
         "verify",
         "Every object pair of a massive model within a tolerance (0: every collision), through a "
-        "cache of bounded size; JSON on standard output or --json FILE, progress on standard "
+        "cache of bounded size; JSON on standard output or --out FILE, progress on standard "
         "error");
     auto* store_opt =
         verify->add_option("--store", verify_args->store, "Run in this process on the store in DIR")
@@ -700,8 +686,7 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
         ->add_flag("--brute-force", verify_args->brute_force,
                    "With --store: every object pair with everything in memory (the reference)")
         ->needs(store_opt);
-    verify->add_option("--json", verify_args->json_file, "Write the JSON result to FILE")
-        ->type_name("FILE");
+    add_json_output(*verify, verify_args->output, true);
     verify->add_flag("--quiet", verify_args->quiet, "No progress on standard error");
     verify->callback([verify, verify_args, &exit_code] {
         if (verify_args->store.empty() && verify_args->server.empty()) {
@@ -756,8 +741,7 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
                      "With --store: the cache budget (default 160M)")
         ->check(size_text(1024))
         ->needs(review_store);
-    review->add_option("--json", review_args->json_file, "Write the JSON result to FILE")
-        ->type_name("FILE");
+    add_json_output(*review, review_args->output, true);
     review->add_flag("--quiet", review_args->quiet, "No progress on standard error");
     review->callback([review, review_args, &exit_code] {
         if (review_args->store.empty() && review_args->server.empty()) {

@@ -75,10 +75,10 @@ for m in "${budgets[@]}"; do
   for _ in $(seq 100); do grep -q '^listening on' "$work/daemon.log" && break; sleep 0.1; done
   addr="$(sed -n 's/^listening on \([^ ]*\).*/\1/p' "$work/daemon.log" | head -1)"
   t0=$(date +%s.%N)
-  "$proxima" verify --quiet --server "$addr" --model "$name" --tolerance 0 --json "$work/verify.json"
+  "$proxima" verify --quiet --server "$addr" --model "$name" --tolerance 0 --out "$work/verify.json"
   t1=$(date +%s.%N)
   "$proxima" review --quiet --server "$addr" --model "$name" --avatar "$work/avatar.off" \
-    --path "$work/path.txt" --tolerance 0.05 --json "$work/review.json"
+    --path "$work/path.txt" --tolerance 0.05 --out "$work/review.json"
   hwm=$(awk '/VmHWM/ {print $2}' "/proc/$pid/status")
   p99=$(python3 -c "import json,sys; d=json.load(open('$work/review.json')); print('%.2f' % d['latency_ms']['p99'])")
   kill "$pid"; wait "$pid" 2>/dev/null || true; pid=

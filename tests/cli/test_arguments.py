@@ -126,6 +126,36 @@ class Arguments(unittest.TestCase):
         self.assertIn("limits must be at least 1", p.stderr)
 
 
+    def test_json_on_stdout_or_out_file_everywhere(self):
+        import json
+        stdout = run_program(PROXIMA, "distance", "--json", self.a, self.b)
+        self.assertEqual(stdout.returncode, 0, stdout.stderr)
+        self.assertEqual(len(stdout.stdout.strip().splitlines()), 1, "one line")
+        out = os.path.join(self.tmp, "distance.json")
+        p = run_program(PROXIMA, "distance", "--out", out, self.a, self.b)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertEqual(p.stdout, "")
+        self.assertRegex(p.stderr.strip(), rf"^distance: 2 objects, \d+ exact tests; JSON in {out}$")
+        with open(out) as f:
+            written = json.load(f)
+        strip = lambda d: {k: v for k, v in d.items() if k != "stats"}  # noqa: E731
+        self.assertEqual(strip(written), strip(json.loads(stdout.stdout)))
+        # An unwritable --out is bad input (exit 1), not a crash.
+        p = run_program(PROXIMA, "distance", "--out", os.path.join(self.tmp, "no", "dir.json"),
+                        self.a, self.b)
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("cannot write", p.stderr)
+        # verify and review: --json is a flag (their default output); the old "--json FILE"
+        # is a usage error.
+        for command in (["verify", "--store", self.tmp, "--tolerance", "0"],
+                        ["review", "--store", self.tmp, "--avatar", self.a, "--path", self.a]):
+            with self.subTest(command=command[0]):
+                p = run_program(PROXIMA, *command, "--json", out)
+                self.assertEqual(p.returncode, 2, p.stderr)
+                h = run_program(PROXIMA, command[0], "--help").stdout
+                self.assertIn("--out FILE", h)
+                self.assertRegex(h, r"--json\s+Print the JSON result")
+
     def test_a_port_in_use_is_one_clean_line(self):
         daemon = Daemon(PROXIMAD, "--gpu", "off")
         try:

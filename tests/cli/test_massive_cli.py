@@ -113,7 +113,7 @@ class MassiveCli(unittest.TestCase):
 
     def test_verify_progress_and_json_file(self):
         out = os.path.join(self.tmp, "verify.json")
-        p = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0.1", "--json", out)
+        p = run(PROXIMA, "verify", "--store", self.store, "--tolerance", "0.1", "--out", out)
         self.assertEqual(p.returncode, 0, p.stderr)
         self.assertEqual(p.stdout, "")
         self.assertIn("verifying", p.stderr)
