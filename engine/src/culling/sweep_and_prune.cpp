@@ -22,12 +22,12 @@ void SweepAndPrune::update(const Scene& scene) {
     const std::size_t n = scene.size();
     std::unordered_map<ObjectId, std::size_t> index;
     index.reserve(n);
-    std::vector<double> lo(n);
-    std::vector<double> hi(n);
+    m_box_lo.resize(n);
+    m_box_hi.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
         index.emplace(scene[i].id, i);
-        lo[i] = scene[i].box.lo.x;
-        hi[i] = scene[i].box.hi.x;
+        m_box_lo[i] = scene[i].box.lo.x;
+        m_box_hi[i] = scene[i].box.hi.x;
     }
     // Previous order of surviving objects, then new objects at the end.
     std::vector<std::uint32_t> order;
@@ -45,7 +45,7 @@ void SweepAndPrune::update(const Scene& scene) {
         }
     }
     // Insertion sort: linear when the order is nearly right, which it is between frames.
-    m_swaps = m_intervals.resort(lo, hi, std::move(order));
+    m_swaps = m_intervals.resort(m_box_lo, m_box_hi, std::move(order));
     m_ids.resize(n);
     m_rank.assign(n, 0);
     m_scale = 0.0;

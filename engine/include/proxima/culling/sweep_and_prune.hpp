@@ -35,6 +35,8 @@ class SweepAndPrune {
     SortedIntervals m_intervals;      // scene indices sorted by box.lo.x
     std::vector<std::size_t> m_rank;  // scene index -> position in the sorted order
     double m_scale = 0.0;             // largest coordinate magnitude (for rounding slack)
+    std::vector<double> m_box_lo;     // update's scratch: box.lo.x by scene index
+    std::vector<double> m_box_hi;     // update's scratch: box.hi.x by scene index
     std::uint64_t m_swaps = 0;
 };
 
