@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <numeric>
 
+#include "proxima/culling/bvh_build.hpp"
+
 namespace proxima {
 
 void Bvh::compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology) {
@@ -41,12 +43,8 @@ struct Builder {
         }
         // Median split on the longest axis of the centre bounds: balanced trees keep refitted
         // boxes reasonably tight under deformation, and coincident centres still split.
-        const Vec3 ext = cbox.extent();
-        const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
-        const auto mid = begin + count / 2;
-        std::nth_element(
-            order.begin() + begin, order.begin() + mid, order.begin() + end,
-            [&](std::uint32_t a, std::uint32_t b) { return centers[a][axis] < centers[b][axis]; });
+        const auto mid = bvh_build::split_at_median<bvh_build::Ties::unordered>(
+            order, begin, end, cbox, [&](std::uint32_t t) -> const Vec3& { return centers[t]; });
         build(begin, mid);  // left child is index + 1
         const auto right = build(mid, end);
         nodes[index].first = right;

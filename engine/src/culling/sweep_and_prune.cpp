@@ -22,74 +22,53 @@ void SweepAndPrune::update(const Scene& scene) {
     const std::size_t n = scene.size();
     std::unordered_map<ObjectId, std::size_t> index;
     index.reserve(n);
+    m_box_lo.resize(n);
+    m_box_hi.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
         index.emplace(scene[i].id, i);
+        m_box_lo[i] = scene[i].box.lo.x;
+        m_box_hi[i] = scene[i].box.hi.x;
     }
     // Previous order of surviving objects, then new objects at the end.
-    std::vector<std::size_t> order;
+    std::vector<std::uint32_t> order;
     order.reserve(n);
     std::vector<char> placed(n, 0);
     for (auto id : m_ids) {
         if (auto it = index.find(id); it != index.end()) {
-            order.push_back(it->second);
+            order.push_back(static_cast<std::uint32_t>(it->second));
             placed[it->second] = 1;
         }
     }
     for (std::size_t i = 0; i < n; ++i) {
         if (placed[i] == 0) {
-            order.push_back(i);
+            order.push_back(static_cast<std::uint32_t>(i));
         }
     }
     // Insertion sort: linear when the order is nearly right, which it is between frames.
-    m_swaps = 0;
-    for (std::size_t k = 1; k < order.size(); ++k) {
-        const auto v = order[k];
-        const double key = scene[v].box.lo.x;
-        std::size_t j = k;
-        while (j > 0 && scene[order[j - 1]].box.lo.x > key) {
-            order[j] = order[j - 1];
-            --j;
-            ++m_swaps;
-        }
-        order[j] = v;
-    }
-    m_order = std::move(order);
+    m_swaps = m_intervals.resort(m_box_lo, m_box_hi, std::move(order));
     m_ids.resize(n);
-    m_lo.resize(n);
     m_rank.assign(n, 0);
-    m_max_extent = 0.0;
     m_scale = 0.0;
+    const auto& sorted = m_intervals.order();
     for (std::size_t k = 0; k < n; ++k) {
-        const auto& obj = scene[m_order[k]];
+        const auto& obj = scene[sorted[k]];
         m_ids[k] = obj.id;
-        m_lo[k] = obj.box.lo.x;
-        m_rank[m_order[k]] = k;
-        m_max_extent = std::max(m_max_extent, obj.box.hi.x - obj.box.lo.x);
+        m_rank[sorted[k]] = k;
         m_scale = std::max(m_scale, coordinate_scale(obj.box));
     }
 }
 
 void SweepAndPrune::within(const Scene& scene, std::size_t i, double radius,
                            std::vector<std::size_t>& out) const {
-    const Aabb& box = scene[i].box;
-    const double r = radius * (1.0 + 1e-9) + rounding_slack(m_scale);
-    // Every j with box.lo.x - r - extent(j) <= lo_j <= box.hi.x + r may come within r along x.
-    const double from = box.lo.x - r - m_max_extent;
-    const double to = box.hi.x + r;
-    auto first = std::lower_bound(m_lo.begin(), m_lo.end(), from);
-    auto last = std::upper_bound(m_lo.begin(), m_lo.end(), to);
-    const double r_sq = r * r;
+    const double r = SortedIntervals::widened(radius, rounding_slack(m_scale));
     std::vector<std::pair<double, std::size_t>> found;
-    for (auto it = first; it != last; ++it) {
-        const auto j = m_order[static_cast<std::size_t>(it - m_lo.begin())];
-        if (j == i) {
-            continue;
-        }
-        const double d = box_squared_distance(box, scene[j].box);
-        if (d <= r_sq) {
-            found.emplace_back(d, j);
-        }
-    }
+    m_intervals.within(
+        scene[i].box, r, 0.0, [&](std::uint32_t j) -> const Aabb& { return scene[j].box; },
+        [&](std::uint32_t j, double d) {
+            if (j != i) {
+                found.emplace_back(d, j);
+            }
+        });
     std::sort(found.begin(), found.end());
     for (const auto& f : found) {
         out.push_back(f.second);
@@ -97,7 +76,7 @@ void SweepAndPrune::within(const Scene& scene, std::size_t i, double radius,
 }
 
 double SweepAndPrune::separation_upper_bound(const Scene& scene, std::size_t i) const {
-    const std::size_t n = m_order.size();
+    const std::size_t n = m_intervals.size();
     if (n < 2) {
         return std::numeric_limits<double>::infinity();
     }
@@ -110,7 +89,8 @@ double SweepAndPrune::separation_upper_bound(const Scene& scene, std::size_t i) 
     const std::size_t hi = std::min(n - 1, k + REACH);
     for (std::size_t p = lo; p <= hi; ++p) {
         if (p != k) {
-            best = std::min(best, box_max_distance(scene[i].box, scene[m_order[p]].box));
+            best =
+                std::min(best, box_max_distance(scene[i].box, scene[m_intervals.order()[p]].box));
         }
     }
     return best;

@@ -120,8 +120,45 @@ Vec3 unpack(std::uint64_t key, double h) {
     return {static_cast<double>(i) * h, static_cast<double>(j) * h, static_cast<double>(k) * h};
 }
 
-Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobResult& out) {
-    const auto t_start = Clock::now();
+// The grid of one run: cell h, sampling radius rho, band radius and the rounding slack.
+struct Grid {
+    double h = 1.0;
+    double rho = 0.0;
+    double radius = 1.0;
+    double slack = 0.0;
+};
+
+// The best sample of each triangle so far (for U(f) and its partner).
+struct BestSamples {
+    std::vector<double> score;
+    std::vector<std::uint32_t> sample;
+    std::vector<double> dist;
+};
+
+// The bucket grid over the sampled region: its origin, bucket size and dimensions.
+struct Buckets {
+    Aabb sampled;
+    double size = 1.0;
+    std::array<std::uint32_t, 3> dims{};
+
+    // The bucket coordinate of x along axis a, clamped to the grid.
+    std::uint32_t coord(double x, int a) const {
+        const double c = std::floor((x - sampled.lo[a]) / size);
+        if (std::isnan(c)) {
+            return std::uint32_t{0};  // unreachable with the finite boxes checked in step 0
+        }
+        return static_cast<std::uint32_t>(std::clamp(c, 0.0, static_cast<double>(dims[a] - 1)));
+    }
+    // The flattened bucket number of (i, j, k).
+    std::uint64_t flat(std::uint32_t i, std::uint32_t j, std::uint32_t k) const {
+        return i + dims[0] * (std::uint64_t{j} + std::uint64_t{dims[1]} * k);
+    }
+    // The number of buckets.
+    std::uint64_t count() const { return std::uint64_t{dims[0]} * dims[1] * dims[2]; }
+};
+
+// Numbers the job's triangles (each object's first one) and resets the bounds; returns the count.
+std::size_t reset_result(const Scene& scene, const Job& job, JobResult& out) {
     const std::size_t nobj = job.objects.size();
     out.offsets.assign(nobj + 1, 0);
     for (std::size_t k = 0; k < nobj; ++k) {
@@ -131,14 +168,13 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
     out.lower.assign(nt, -std::numeric_limits<double>::infinity());
     out.upper.assign(nt, std::numeric_limits<double>::infinity());
     out.partner.assign(nt, dvd::NO_TRIANGLE);
-    if (nt == 0) {
-        return {};
-    }
-    if (nt >= dvd::NO_TRIANGLE) {
-        return {StatusCode::resource_exhausted, "voronoi culler: too many triangles"};
-    }
-    std::vector<std::uint32_t> tri_object(nt);
-    std::vector<Triangle> tris(nt);
+    return nt;
+}
+
+// Copies the job's triangles (and each one's job object) in job order; returns the region's box.
+Aabb gather_triangles(const Scene& scene, const Job& job, const std::vector<std::size_t>& offsets,
+                      std::vector<Triangle>& tris, std::vector<std::uint32_t>& tri_object) {
+    const std::size_t nobj = job.objects.size();
     Aabb region;
     for (std::size_t k = 0; k < nobj; ++k) {
         region.extend(scene[job.objects[k]].box);
@@ -147,60 +183,54 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
         const SceneObject& obj = scene[job.objects[k]];
         for (std::uint32_t t = 0; t < obj.triangle_count(); ++t) {
             const auto& idx = obj.triangle(t);
-            tris[out.offsets[k] + t] = {obj.vertices[idx[0]], obj.vertices[idx[1]],
-                                        obj.vertices[idx[2]]};
-            tri_object[out.offsets[k] + t] = static_cast<std::uint32_t>(k);
+            tris[offsets[k] + t] = {obj.vertices[idx[0]], obj.vertices[idx[1]],
+                                    obj.vertices[idx[2]]};
+            tri_object[offsets[k] + t] = static_cast<std::uint32_t>(k);
         }
     });
-    const double scale = coordinate_scale(region);
-    const double slack = rounding_slack(scale);
-    // Grid coordinates must fit the packed key.
-    const double h = std::max(job.cell, scale / static_cast<double>(GRID_HALF_RANGE >> 1));
-    const double rho = h * std::sqrt(3.0) / 2.0 * (1.0 + 1e-12) + 4.0 * slack;
-    const double R = job.radius;
-    out.stats.cell = h;
+    return region;
+}
 
-    // 0. The work bound: grid points in the triangles' boxes, counted before any is visited. A
-    // band radius whose boxes overflow (a tolerance near the largest double: fuzz_frames) culls
-    // nothing either: skipped too, before the bucket coordinates would turn NaN, and so is
-    // geometry beyond float's range.
-    {
-        // The kernel works in float, relative to the region's centre: the radius and the
-        // region's extent must stay well inside float's range too.
-        constexpr double FLOAT_SAFE = 1e36;
-        const Aabb reach = region.grown(job.radius * (1.0 + 1e-9) + 4.0 * slack);
-        bool finite = std::isfinite(job.radius) && job.radius < FLOAT_SAFE;
-        for (int a = 0; a < 3; ++a) {
-            finite = finite && std::isfinite(reach.lo[a]) && std::isfinite(reach.hi[a]) &&
-                     reach.hi[a] - reach.lo[a] < FLOAT_SAFE;
-        }
-        if (!finite) {
-            out.skipped = true;
-            out.stats.skipped = 1;
-            out.stats.seconds = seconds_since(t_start);
-            return {};
-        }
-        const double limit =
-            static_cast<double>(MAX_GRID_POINTS_BASE) +
-            static_cast<double>(MAX_GRID_POINTS_PER_TRIANGLE) * static_cast<double>(nt);
-        double points = 0;
-        for (std::size_t f = 0; f < nt && points <= limit; ++f) {
-            const Aabb box = triangle_box(tris[f][0], tris[f][1], tris[f][2]).grown(rho);
-            double in_box = 1;
-            for (int a = 0; a < 3; ++a) {
-                in_box *= std::max(0.0, std::floor(box.hi[a] / h) - std::ceil(box.lo[a] / h) + 1);
-            }
-            points += in_box;
-        }
-        if (!(points <= limit)) {
-            out.skipped = true;
-            out.stats.skipped = 1;
-            out.stats.seconds = seconds_since(t_start);
-            return {};
-        }
+// Step 0, the work bound: true when the job must be skipped (boxes beyond float's range or more
+// grid points in the triangles' boxes than the limit), decided before any point is visited.
+bool exceeds_work_bound(const Job& job, const Aabb& region, const std::vector<Triangle>& tris,
+                        const Grid& g) {
+    // A band radius whose boxes overflow (a tolerance near the largest double: fuzz_frames)
+    // culls nothing either: skipped too, before the bucket coordinates would turn NaN, and so is
+    // geometry beyond float's range. The kernel works in float, relative to the region's centre:
+    // the radius and the region's extent must stay well inside float's range too.
+    constexpr double FLOAT_SAFE = 1e36;
+    const Aabb reach = region.grown(job.radius * (1.0 + 1e-9) + 4.0 * g.slack);
+    bool finite = std::isfinite(job.radius) && job.radius < FLOAT_SAFE;
+    for (int a = 0; a < 3; ++a) {
+        finite = finite && std::isfinite(reach.lo[a]) && std::isfinite(reach.hi[a]) &&
+                 reach.hi[a] - reach.lo[a] < FLOAT_SAFE;
     }
+    if (!finite) {
+        return true;
+    }
+    const std::size_t nt = tris.size();
+    const double limit =
+        static_cast<double>(MAX_GRID_POINTS_BASE) +
+        static_cast<double>(MAX_GRID_POINTS_PER_TRIANGLE) * static_cast<double>(nt);
+    double points = 0;
+    for (std::size_t f = 0; f < nt && points <= limit; ++f) {
+        const Aabb box = triangle_box(tris[f][0], tris[f][1], tris[f][2]).grown(g.rho);
+        double in_box = 1;
+        for (int a = 0; a < 3; ++a) {
+            in_box *= std::max(0.0, std::floor(box.hi[a] / g.h) - std::ceil(box.lo[a] / g.h) + 1);
+        }
+        points += in_box;
+    }
+    return !(points <= limit);
+}
 
-    // 1. Samples: Q_f for every triangle, in triangle order (deterministic).
+// Step 1, the samples: Q_f for every triangle, in triangle order (deterministic).
+std::vector<Entry> collect_samples(const std::vector<Triangle>& tris,
+                                   const std::vector<std::uint32_t>& tri_object, const Grid& g) {
+    const std::size_t nt = tris.size();
+    const double h = g.h;
+    const double rho = g.rho;
     const std::size_t chunk = 256;
     std::vector<std::vector<Entry>> parts((nt + chunk - 1) / chunk);
     tbb::parallel_for(std::size_t{0}, parts.size(), [&](std::size_t c) {
@@ -220,7 +250,7 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
             const bool plane_filter = nlen > 1e-6 * edge_sq && nlen > 0.0;
             const Vec3 unit = plane_filter ? normal / nlen : Vec3{};
             const double plane_limit =
-                rho * (1.0 + 1e-9) + 1e-8 * (std::sqrt(edge_sq) + rho) + 4.0 * slack;
+                rho * (1.0 + 1e-9) + 1e-8 * (std::sqrt(edge_sq) + rho) + 4.0 * g.slack;
             std::int64_t lo[3], hi[3];
             for (int a = 0; a < 3; ++a) {
                 lo[a] = static_cast<std::int64_t>(std::ceil(box.lo[a] / h));
@@ -245,22 +275,26 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
         }
     });
     std::vector<Entry> entries;
-    {
-        std::size_t total = 0;
-        for (const auto& p : parts) {
-            total += p.size();
-        }
-        entries.reserve(total);
-        for (auto& p : parts) {
-            entries.insert(entries.end(), p.begin(), p.end());
-            std::vector<Entry>().swap(p);
-        }
+    std::size_t total = 0;
+    for (const auto& p : parts) {
+        total += p.size();
     }
-    // Inter-object mode: the kernel's answer depends only on the owner's object, so one sample
-    // per (object, grid point), owned by its smallest triangle.
-    std::vector<std::uint32_t> entry_sample(entries.size());
-    std::vector<std::size_t> sample_entry;  // first entry of each sample
-    if (job.mode == dvd::Mode::inter_object) {
+    entries.reserve(total);
+    for (auto& p : parts) {
+        entries.insert(entries.end(), p.begin(), p.end());
+        std::vector<Entry>().swap(p);
+    }
+    return entries;
+}
+
+// Groups the entries into kernel samples: in inter-object mode the kernel's answer depends only
+// on the owner's object, so one sample per (object, grid point), owned by its smallest triangle;
+// in intra-object mode every entry is a sample.
+void group_samples(dvd::Mode mode, std::vector<Entry>& entries,
+                   std::vector<std::uint32_t>& entry_sample,
+                   std::vector<std::size_t>& sample_entry) {
+    entry_sample.resize(entries.size());
+    if (mode == dvd::Mode::inter_object) {
         tbb::parallel_sort(entries.begin(), entries.end(), [](const Entry& x, const Entry& y) {
             return std::tie(x.object, x.key, x.owner) < std::tie(y.object, y.key, y.owner);
         });
@@ -278,67 +312,53 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
             entry_sample[e] = static_cast<std::uint32_t>(e);
         }
     }
-    const std::size_t ns = sample_entry.size();
-    if (ns >= dvd::NO_TRIANGLE) {
-        return {StatusCode::resource_exhausted, "voronoi culler: too many samples"};
-    }
-    out.stats.samples = ns;
+}
 
-    // 2. Buckets over the sampled region; each lists the triangles whose box grown by R reaches
-    // it (decided in double, so a sample's bucket holds every triangle within R of it).
-    const Aabb sampled = region.grown(rho + h);
-    double bsize = std::max(2.0 * h, 0.5 * R);
-    std::array<std::uint32_t, 3> dims{};
+// Step 2a: the bucket grid over the sampled region, coarsened until it has at most MAX_BUCKETS.
+Buckets choose_buckets(const Aabb& region, const Grid& g) {
+    Buckets b;
+    b.sampled = region.grown(g.rho + g.h);
+    b.size = std::max(2.0 * g.h, 0.5 * g.radius);
     for (;;) {
         std::uint64_t count = 1;
         for (int a = 0; a < 3; ++a) {
-            const double n = std::floor((sampled.hi[a] - sampled.lo[a]) / bsize) + 1.0;
-            dims[a] = static_cast<std::uint32_t>(std::min(n, 4e9));
-            count *= dims[a];
+            const double n = std::floor((b.sampled.hi[a] - b.sampled.lo[a]) / b.size) + 1.0;
+            b.dims[a] = static_cast<std::uint32_t>(std::min(n, 4e9));
+            count *= b.dims[a];
             count = std::min(count, MAX_BUCKETS + 1);
         }
         if (count <= MAX_BUCKETS) {
             break;
         }
-        bsize *= 1.25;
+        b.size *= 1.25;
     }
-    auto bucket_coord = [&](double x, int a) {
-        const double c = std::floor((x - sampled.lo[a]) / bsize);
-        if (std::isnan(c)) {
-            return std::uint32_t{0};  // unreachable with the finite boxes checked in step 0
-        }
-        return static_cast<std::uint32_t>(std::clamp(c, 0.0, static_cast<double>(dims[a] - 1)));
-    };
-    const std::uint64_t nb = std::uint64_t{dims[0]} * dims[1] * dims[2];
-    dvd::KernelInput in;
-    in.mode = job.mode;
-    in.radius = static_cast<float>(R);
-    in.bucket_dims = dims;
-    in.bucket_size = static_cast<float>(bsize);
-    const Vec3 origin = region.center();
-    for (int a = 0; a < 3; ++a) {
-        in.bucket_origin[a] = static_cast<float>(sampled.lo[a] - origin[a]);
-    }
+    return b;
+}
+
+// Step 2b: each bucket's list of the triangles whose box grown by the band radius reaches it
+// (decided in double, so a sample's bucket holds every triangle within the radius of it).
+Status list_bucket_triangles(const Buckets& b, const std::vector<Triangle>& tris, const Grid& g,
+                             dvd::KernelInput& in) {
+    const std::size_t nt = tris.size();
     std::vector<std::array<std::uint32_t, 6>> ranges(nt);
     tbb::parallel_for(std::size_t{0}, nt, [&](std::size_t f) {
         const Triangle& tr = tris[f];
-        const Aabb box = triangle_box(tr[0], tr[1], tr[2]).grown(R * (1.0 + 1e-9) + 4.0 * slack);
+        const Aabb box =
+            triangle_box(tr[0], tr[1], tr[2]).grown(g.radius * (1.0 + 1e-9) + 4.0 * g.slack);
         for (int a = 0; a < 3; ++a) {
-            ranges[f][a] = bucket_coord(box.lo[a], a);
-            ranges[f][3 + a] = bucket_coord(box.hi[a], a);
+            ranges[f][a] = b.coord(box.lo[a], a);
+            ranges[f][3 + a] = b.coord(box.hi[a], a);
         }
     });
+    const std::uint64_t nb = b.count();
     in.bucket_offsets.assign(nb + 1, 0);
-    auto flat = [&](std::uint32_t i, std::uint32_t j, std::uint32_t k) {
-        return i + dims[0] * (std::uint64_t{j} + std::uint64_t{dims[1]} * k);
-    };
     std::uint64_t listed = 0;
     for (std::size_t f = 0; f < nt; ++f) {
         const auto& r = ranges[f];
         for (auto k = r[2]; k <= r[5]; ++k) {
             for (auto j = r[1]; j <= r[4]; ++j) {
                 for (auto i = r[0]; i <= r[3]; ++i) {
-                    ++in.bucket_offsets[flat(i, j, k) + 1];
+                    ++in.bucket_offsets[b.flat(i, j, k) + 1];
                     ++listed;
                 }
             }
@@ -348,41 +368,46 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
         return {StatusCode::resource_exhausted,
                 "voronoi culler: bucket lists too long (band radius too large for the cell)"};
     }
-    for (std::uint64_t b = 0; b < nb; ++b) {
-        in.bucket_offsets[b + 1] += in.bucket_offsets[b];
+    for (std::uint64_t i = 0; i < nb; ++i) {
+        in.bucket_offsets[i + 1] += in.bucket_offsets[i];
     }
     in.bucket_triangles.resize(listed);
-    {
-        std::vector<std::uint32_t> fill(in.bucket_offsets.begin(), in.bucket_offsets.end() - 1);
-        for (std::size_t f = 0; f < nt; ++f) {
-            const auto& r = ranges[f];
-            for (auto k = r[2]; k <= r[5]; ++k) {
-                for (auto j = r[1]; j <= r[4]; ++j) {
-                    for (auto i = r[0]; i <= r[3]; ++i) {
-                        in.bucket_triangles[fill[flat(i, j, k)]++] = static_cast<std::uint32_t>(f);
-                    }
+    std::vector<std::uint32_t> fill(in.bucket_offsets.begin(), in.bucket_offsets.end() - 1);
+    for (std::size_t f = 0; f < nt; ++f) {
+        const auto& r = ranges[f];
+        for (auto k = r[2]; k <= r[5]; ++k) {
+            for (auto j = r[1]; j <= r[4]; ++j) {
+                for (auto i = r[0]; i <= r[3]; ++i) {
+                    in.bucket_triangles[fill[b.flat(i, j, k)]++] = static_cast<std::uint32_t>(f);
                 }
             }
         }
     }
+    return {};
+}
 
-    // 3. Single-precision input relative to the region's centre.
+// Step 3a: the triangles in single precision relative to origin, with scene-wide vertex ids;
+// returns the largest absolute coordinate written.
+double fill_triangle_input(const Scene& scene, const Job& job,
+                           const std::vector<std::size_t>& offsets,
+                           const std::vector<Triangle>& tris,
+                           const std::vector<std::uint32_t>& tri_object, const Vec3& origin,
+                           dvd::KernelInput& in) {
+    const std::size_t nt = tris.size();
     double max_abs = 0.0;
     in.triangle_vertices.resize(9 * nt);
     in.triangle_indices.resize(3 * nt);
     in.triangle_object = tri_object;
-    {
-        std::uint32_t vertex_base = 0;
-        for (std::size_t k = 0; k < nobj; ++k) {
-            const SceneObject& obj = scene[job.objects[k]];
-            for (std::uint32_t t = 0; t < obj.triangle_count(); ++t) {
-                const auto& idx = obj.triangle(t);
-                for (int c = 0; c < 3; ++c) {
-                    in.triangle_indices[3 * (out.offsets[k] + t) + c] = vertex_base + idx[c];
-                }
+    std::uint32_t vertex_base = 0;
+    for (std::size_t k = 0; k < job.objects.size(); ++k) {
+        const SceneObject& obj = scene[job.objects[k]];
+        for (std::uint32_t t = 0; t < obj.triangle_count(); ++t) {
+            const auto& idx = obj.triangle(t);
+            for (int c = 0; c < 3; ++c) {
+                in.triangle_indices[3 * (offsets[k] + t) + c] = vertex_base + idx[c];
             }
-            vertex_base += static_cast<std::uint32_t>(obj.vertices.size());
         }
+        vertex_base += static_cast<std::uint32_t>(obj.vertices.size());
     }
     for (std::size_t f = 0; f < nt; ++f) {
         for (std::size_t c = 0; c < 3; ++c) {
@@ -394,10 +419,20 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
             }
         }
     }
+    return max_abs;
+}
+
+// Step 3b: the samples in single precision relative to origin, with owner and bucket (and their
+// double positions in sample_pos); returns max_abs raised to the largest coordinate written.
+double fill_sample_input(const std::vector<Entry>& entries,
+                         const std::vector<std::size_t>& sample_entry, const Buckets& b, double h,
+                         const Vec3& origin, double max_abs, dvd::KernelInput& in,
+                         std::vector<Vec3>& sample_pos) {
+    const std::size_t ns = sample_entry.size();
     in.sample_points.resize(3 * ns);
     in.sample_owner.resize(ns);
     in.sample_bucket.resize(ns);
-    std::vector<Vec3> sample_pos(ns);
+    sample_pos.resize(ns);
     for (std::size_t s = 0; s < ns; ++s) {
         const Entry& e = entries[sample_entry[s]];
         const Vec3 q = unpack(e.key, h);
@@ -408,28 +443,33 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
             in.sample_points[3 * s + a] = static_cast<float>(x);
         }
         in.sample_owner[s] = e.owner;
-        in.sample_bucket[s] = static_cast<std::uint32_t>(
-            flat(bucket_coord(q.x, 0), bucket_coord(q.y, 1), bucket_coord(q.z, 2)));
+        in.sample_bucket[s] =
+            static_cast<std::uint32_t>(b.flat(b.coord(q.x, 0), b.coord(q.y, 1), b.coord(q.z, 2)));
     }
-    // The float coordinates are at most max_abs rounded: widen by one float ulp.
-    const double m = max_abs * (1.0 + 1.0 / 8388608.0);
+    return max_abs;
+}
 
-    // 4. The kernel.
-    dvd::KernelOutput kout;
+// Step 4: runs the kernel and checks that it answered every sample.
+Status run_kernel(dvd::Backend& backend, const dvd::KernelInput& in, std::size_t ns,
+                  dvd::KernelOutput& kout, VoronoiStats& stats) {
     const auto t_kernel = Clock::now();
     if (Status s = backend.run(in, kout); !s.ok()) {
         return s;
     }
-    out.stats.dvd_seconds = seconds_since(t_kernel);
+    stats.dvd_seconds = seconds_since(t_kernel);
     if (kout.distance.size() != ns || kout.nearest.size() != ns) {
         return {StatusCode::internal, "voronoi culler: kernel returned " +
                                           std::to_string(kout.distance.size()) + " results for " +
                                           std::to_string(ns) + " samples"};
     }
+    return {};
+}
 
-    // 5. Error allowance: the generic bound plus the worst triangle's shape term.
+// Step 5, the error allowance: the generic bound plus the worst triangle's shape term, for float
+// coordinates of magnitude at most m.
+double error_allowance(const std::vector<Triangle>& tris, const Vec3& origin, double m) {
     const double shape = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, nt, 1024), 0.0,
+        tbb::blocked_range<std::size_t>(0, tris.size(), 1024), 0.0,
         [&](const auto& range, double acc) {
             for (std::size_t f = range.begin(); f != range.end(); ++f) {
                 double c[3][3];
@@ -443,13 +483,20 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
             return acc;
         },
         [](double x, double y) { return std::max(x, y); });
-    const double eps = dvd::kernel_error_bound(m) + shape;
-    out.stats.epsilon = eps;
+    return dvd::kernel_error_bound(m) + shape;
+}
 
-    // 6. Bounds per triangle (Lemma 2), sequential over entries in a fixed order.
-    std::vector<double> best_score(nt, std::numeric_limits<double>::infinity());
-    std::vector<std::uint32_t> best_sample(nt, dvd::NO_TRIANGLE);
-    std::vector<double> best_dist(nt, 0.0);
+// Step 6a: L(f) per triangle (Lemma 2) and each triangle's best sample for U(f), sequential over
+// the entries in a fixed order.
+Status accumulate_bounds(const std::vector<Entry>& entries,
+                         const std::vector<std::uint32_t>& entry_sample,
+                         const dvd::KernelOutput& kout, const Grid& g, double eps, JobResult& out,
+                         BestSamples& best) {
+    const std::size_t nt = out.lower.size();
+    const double R = g.radius;
+    best.score.assign(nt, std::numeric_limits<double>::infinity());
+    best.sample.assign(nt, dvd::NO_TRIANGLE);
+    best.dist.assign(nt, 0.0);
     for (std::size_t e = 0; e < entries.size(); ++e) {
         const Entry& en = entries[e];
         const std::uint32_t s = entry_sample[e];
@@ -460,22 +507,30 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
                                               std::to_string(nt)};
         }
         const double d = found ? std::min(static_cast<double>(kout.distance[s]), R) : R;
-        const double lower = d - rho - eps;
+        const double lower = d - g.rho - eps;
         const std::uint32_t f = en.owner;
         if (out.lower[f] == -std::numeric_limits<double>::infinity() || lower < out.lower[f]) {
             out.lower[f] = lower;
         }
         if (found) {
             const double score = en.dist + d;
-            if (score < best_score[f] || (score == best_score[f] && s < best_sample[f])) {
-                best_score[f] = score;
-                best_sample[f] = s;
-                best_dist[f] = en.dist;
+            if (score < best.score[f] || (score == best.score[f] && s < best.sample[f])) {
+                best.score[f] = score;
+                best.sample[f] = s;
+                best.dist[f] = en.dist;
             }
         }
     }
-    tbb::parallel_for(std::size_t{0}, nt, [&](std::size_t f) {
-        const std::uint32_t s = best_sample[f];
+    return {};
+}
+
+// Step 6b: U(f) and the partner g of each triangle with a best sample q*, recomputed in double:
+// d(q*, f) + d(q*, g).
+void resolve_partners(const BestSamples& best, const dvd::KernelOutput& kout,
+                      const std::vector<Triangle>& tris, const std::vector<Vec3>& sample_pos,
+                      double slack, JobResult& out) {
+    tbb::parallel_for(std::size_t{0}, tris.size(), [&](std::size_t f) {
+        const std::uint32_t s = best.sample[f];
         if (s == dvd::NO_TRIANGLE) {
             return;
         }
@@ -483,9 +538,83 @@ Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobRes
         const Triangle& tg = tris[g];
         const double dg =
             std::sqrt(point_triangle(sample_pos[s], tg[0], tg[1], tg[2]).squared_distance);
-        out.upper[f] = (best_dist[f] + dg) * (1.0 + 1e-12) + 4.0 * slack;
+        out.upper[f] = (best.dist[f] + dg) * (1.0 + 1e-12) + 4.0 * slack;
         out.partner[f] = g;
     });
+}
+
+// Runs one job: samples, buckets, kernel, then L(f), U(f) and the partner of every job triangle.
+Status run_job(const Scene& scene, dvd::Backend& backend, const Job& job, JobResult& out) {
+    const auto t_start = Clock::now();
+    const std::size_t nt = reset_result(scene, job, out);
+    if (nt == 0) {
+        return {};
+    }
+    if (nt >= dvd::NO_TRIANGLE) {
+        return {StatusCode::resource_exhausted, "voronoi culler: too many triangles"};
+    }
+    std::vector<std::uint32_t> tri_object(nt);
+    std::vector<Triangle> tris(nt);
+    const Aabb region = gather_triangles(scene, job, out.offsets, tris, tri_object);
+    const double scale = coordinate_scale(region);
+    Grid g;
+    g.slack = rounding_slack(scale);
+    // Grid coordinates must fit the packed key.
+    g.h = std::max(job.cell, scale / static_cast<double>(GRID_HALF_RANGE >> 1));
+    g.rho = g.h * std::sqrt(3.0) / 2.0 * (1.0 + 1e-12) + 4.0 * g.slack;
+    g.radius = job.radius;
+    out.stats.cell = g.h;
+
+    if (exceeds_work_bound(job, region, tris, g)) {
+        out.skipped = true;
+        out.stats.skipped = 1;
+        out.stats.seconds = seconds_since(t_start);
+        return {};
+    }
+
+    std::vector<Entry> entries = collect_samples(tris, tri_object, g);
+    std::vector<std::uint32_t> entry_sample;
+    std::vector<std::size_t> sample_entry;  // first entry of each sample
+    group_samples(job.mode, entries, entry_sample, sample_entry);
+    const std::size_t ns = sample_entry.size();
+    if (ns >= dvd::NO_TRIANGLE) {
+        return {StatusCode::resource_exhausted, "voronoi culler: too many samples"};
+    }
+    out.stats.samples = ns;
+
+    const Buckets buckets = choose_buckets(region, g);
+    dvd::KernelInput in;
+    in.mode = job.mode;
+    in.radius = static_cast<float>(g.radius);
+    in.bucket_dims = buckets.dims;
+    in.bucket_size = static_cast<float>(buckets.size);
+    const Vec3 origin = region.center();
+    for (int a = 0; a < 3; ++a) {
+        in.bucket_origin[a] = static_cast<float>(buckets.sampled.lo[a] - origin[a]);
+    }
+    if (Status s = list_bucket_triangles(buckets, tris, g, in); !s.ok()) {
+        return s;
+    }
+
+    double max_abs = fill_triangle_input(scene, job, out.offsets, tris, tri_object, origin, in);
+    std::vector<Vec3> sample_pos;
+    max_abs =
+        fill_sample_input(entries, sample_entry, buckets, g.h, origin, max_abs, in, sample_pos);
+    // The float coordinates are at most max_abs rounded: widen by one float ulp.
+    const double m = max_abs * (1.0 + 1.0 / 8388608.0);
+
+    dvd::KernelOutput kout;
+    if (Status s = run_kernel(backend, in, ns, kout, out.stats); !s.ok()) {
+        return s;
+    }
+    const double eps = error_allowance(tris, origin, m);
+    out.stats.epsilon = eps;
+
+    BestSamples best;
+    if (Status s = accumulate_bounds(entries, entry_sample, kout, g, eps, out, best); !s.ok()) {
+        return s;
+    }
+    resolve_partners(best, kout, tris, sample_pos, g.slack, out);
     out.stats.seconds = seconds_since(t_start);
     return {};
 }

@@ -16,37 +16,26 @@ namespace proxima::massive {
 // ---------------------------------------------------------------------------------------------
 // PieceIndex
 
-PieceIndex::PieceIndex(const std::vector<PieceInfo>& pieces) : m_order(pieces.size()) {
-    std::iota(m_order.begin(), m_order.end(), 0u);
-    std::sort(m_order.begin(), m_order.end(), [&](std::uint32_t a, std::uint32_t b) {
-        return std::tie(pieces[a].box.lo.x, a) < std::tie(pieces[b].box.lo.x, b);
-    });
-    m_lo.reserve(pieces.size());
+PieceIndex::PieceIndex(const std::vector<PieceInfo>& pieces) {
+    std::vector<double> lo(pieces.size());
+    std::vector<double> hi(pieces.size());
     m_boxes.reserve(pieces.size());
-    for (const auto& p : pieces) {
-        m_boxes.push_back(p.box);
-        m_max_extent = std::max(m_max_extent, p.box.hi.x - p.box.lo.x);
+    for (std::size_t i = 0; i < pieces.size(); ++i) {
+        m_boxes.push_back(pieces[i].box);
+        lo[i] = pieces[i].box.lo.x;
+        hi[i] = pieces[i].box.hi.x;
     }
-    for (auto i : m_order) {
-        m_lo.push_back(pieces[i].box.lo.x);
-    }
+    m_intervals.build(lo, hi);
 }
 
 void PieceIndex::within(const Aabb& box, double radius, double slack,
                         std::vector<std::uint32_t>& out) const {
-    const double r = radius * (1.0 + 1e-9) + slack;
-    const double threshold = r * r;
-    // A piece can only be near if its lo.x lies in [box.lo.x - r - max extent, box.hi.x + r].
-    const double from = box.lo.x - r - m_max_extent * (1.0 + 1e-12);
-    const double to = box.hi.x + r;
-    auto it = std::lower_bound(m_lo.begin(), m_lo.end(), from);
-    for (auto k = static_cast<std::size_t>(it - m_lo.begin()); k < m_lo.size() && m_lo[k] <= to;
-         ++k) {
-        const auto p = m_order[k];
-        if (box_squared_distance(m_boxes[p], box) <= threshold) {
-            out.push_back(p);
-        }
-    }
+    // A piece can only be near if its lo.x lies in [box.lo.x - r - max extent, box.hi.x + r]
+    // (the extent widened by 1e-12).
+    m_intervals.within(
+        box, SortedIntervals::widened(radius, slack), 1e-12,
+        [&](std::uint32_t p) -> const Aabb& { return m_boxes[p]; },
+        [&](std::uint32_t p, double /*d*/) { out.push_back(p); });
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <tuple>
 
+#include "proxima/culling/bvh_build.hpp"
 #include "proxima/distance/bounds.hpp"
 
 namespace proxima::massive {
@@ -107,16 +108,9 @@ std::pair<const LazyBvh::Node*, const LazyBvh::Node*> LazyBvh::children(const No
             for (std::uint32_t s = n.first; s < n.first + n.count; ++s) {
                 centres.extend(centre(m_order[s]));
             }
-            const Vec3 e = centres.extent();
-            const int axis = (e.x >= e.y && e.x >= e.z) ? 0 : (e.y >= e.z ? 1 : 2);
-            const std::uint32_t half = n.count / 2;
-            auto begin = m_order.begin() + n.first;
-            std::nth_element(begin, begin + half, begin + n.count,
-                             [&](std::uint32_t a, std::uint32_t b) {
-                                 const double ca = centre(a)[axis];
-                                 const double cb = centre(b)[axis];
-                                 return ca < cb || (ca == cb && a < b);
-                             });
+            const std::uint32_t half = bvh_build::split_at_median<bvh_build::Ties::by_index>(
+                                           m_order, n.first, n.first + n.count, centres, centre) -
+                                       n.first;
             left = allocate_two();
             Node& l = mutable_node(left);
             Node& r = mutable_node(left + 1);

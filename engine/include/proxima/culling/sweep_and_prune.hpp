@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "proxima/culling/sorted_intervals.hpp"
 #include "proxima/scene.hpp"
 
 namespace proxima {
@@ -30,12 +31,12 @@ class SweepAndPrune {
     std::uint64_t last_swaps() const { return m_swaps; }
 
   private:
-    std::vector<ObjectId> m_ids;       // sorted order of the previous frame, by id
-    std::vector<std::size_t> m_order;  // scene indices sorted by box.lo.x
-    std::vector<std::size_t> m_rank;   // scene index -> position in m_order
-    std::vector<double> m_lo;          // box.lo.x in m_order order
-    double m_max_extent = 0.0;         // largest box extent along x
-    double m_scale = 0.0;              // largest coordinate magnitude (for rounding slack)
+    std::vector<ObjectId> m_ids;      // sorted order of the previous frame, by id
+    SortedIntervals m_intervals;      // scene indices sorted by box.lo.x
+    std::vector<std::size_t> m_rank;  // scene index -> position in the sorted order
+    double m_scale = 0.0;             // largest coordinate magnitude (for rounding slack)
+    std::vector<double> m_box_lo;     // update's scratch: box.lo.x by scene index
+    std::vector<double> m_box_hi;     // update's scratch: box.hi.x by scene index
     std::uint64_t m_swaps = 0;
 };
 

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "proxima/culling/sorted_intervals.hpp"
 #include "proxima/massive/cache.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/query/query.hpp"
@@ -32,10 +33,8 @@ class PieceIndex {
                 std::vector<std::uint32_t>& out) const;
 
   private:
-    std::vector<std::uint32_t> m_order;  // by lo.x
-    std::vector<double> m_lo;            // lo.x in that order
-    std::vector<Aabb> m_boxes;           // by piece
-    double m_max_extent = 0.0;
+    SortedIntervals m_intervals;  // pieces by lo.x
+    std::vector<Aabb> m_boxes;    // by piece
 };
 
 // A model as the queries see it: the store's objects plus a shared overlay of edits (objects moved
