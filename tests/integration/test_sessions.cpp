@@ -3,10 +3,14 @@
 // same doubles: vertices travel as float64), topology changes mid-stream, concurrent isolated
 // sessions, clients that vanish mid-stream, and deadlines / cancellation that stop the work.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <fstream>
+#include <iterator>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -403,6 +407,54 @@ TEST(Sessions, DeadlineAndCancelStopTheEngine) {
     auto again = c->query(scene->scene_id, heavy_frame());
     ASSERT_TRUE(again.ok());
     expect_same(again->result, full->result, false);
+}
+
+// CPU seconds the process has used (user + system), from /proc/PID/stat; -1 when unreadable.
+double process_cpu_seconds(pid_t pid) {
+    std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto close = text.rfind(')');  // the command name may hold spaces
+    if (close == std::string::npos) {
+        return -1.0;
+    }
+    std::istringstream fields(text.substr(close + 2));
+    std::string field;
+    double ticks = 0.0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {
+        if (i == 14 || i == 15) {  // utime, stime
+            ticks += std::stod(field);
+        }
+    }
+    return ticks / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+// Issue #18: with the brute-force culler, separation between two objects checked the token only
+// between objects, so a call that hit its deadline kept the daemon computing for seconds after
+// the client had its status. Now the daemon spends (next to) no CPU once the status is out.
+TEST(Sessions, ADeadlineStopsTheBruteForceWithinOneObject) {
+    DaemonProcess daemon;
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    // Two balls of ~26,000 triangles: brute-force separation is 2 x 6.8e8 triangle tests.
+    auto scene = c->create_scene("two-large", heavy_objects(2, 114));
+    ASSERT_TRUE(scene.ok()) << scene.status().to_string();
+    client::ConnectOptions hurried;
+    hurried.call_timeout = 200ms;
+    auto h = connect(daemon, hurried);
+    ASSERT_TRUE(h);
+    FrameRequest frame;
+    frame.queries.separation = true;
+    frame.queries.culler = CullerKind::brute;
+    auto late = h->query(scene->scene_id, frame);
+    EXPECT_EQ(late.status().code(), StatusCode::deadline_exceeded) << late.status().to_string();
+    const double at_status = process_cpu_seconds(daemon.pid());
+    std::this_thread::sleep_for(500ms);
+    const double after = process_cpu_seconds(daemon.pid());
+    ASSERT_GE(at_status, 0.0);
+    // Within one object means within ~1024 triangle tests per thread: milliseconds. The bound is
+    // loose for sanitizer builds on a loaded machine; before the change this was seconds.
+    EXPECT_LT(after - at_status, 0.25) << "the daemon went on computing after the deadline";
 }
 
 }  // namespace

@@ -10,7 +10,7 @@ void BruteCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t
                                   double& bound_sq, PairVisitor visit) const {
     const auto na = static_cast<std::uint32_t>(scene[a].triangle_count());
     const auto nb = static_cast<std::uint32_t>(scene[b].triangle_count());
-    for (std::uint32_t ta = 0; ta < na; ++ta) {
+    for (std::uint32_t ta = 0; ta < na && bound_sq >= 0.0; ++ta) {  // negative: stop
         for (std::uint32_t tb = 0; tb < nb; ++tb) {
             visit(ta, tb);
         }
@@ -24,6 +24,9 @@ void BruteCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup boun
     // Every non-adjacent pair, whatever the bounds; parallel over the first triangle only to keep
     // the reference affordable in tests.
     tbb::parallel_for(std::uint32_t{0}, n, [&](std::uint32_t t) {
+        if (bound_sq(t) < 0.0) {
+            return;  // the query was stopped
+        }
         for (std::uint32_t u = t + 1; u < n; ++u) {
             if (!topo.adjacent(t, u)) {
                 visit(t, u);

@@ -135,7 +135,14 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
             const SceneObject& a = scene[i];
             const SceneObject& b = scene[j];
             culler.nearest_between(scene, i, j, best_sq, [&](std::uint32_t ta, std::uint32_t tb) {
-                ++tests;
+                if (best_sq < 0.0) {
+                    return;  // stopped: the culler ends after this triangle of a
+                }
+                // Two large objects are one long loop: look at the token every 1024 tests.
+                if ((++tests & 1023U) == 0 && work.should_stop()) {
+                    best_sq = -1.0;
+                    return;
+                }
                 const auto cp = triangle_triangle(corners(a, ta), corners(b, tb));
                 if (better(cp.squared_distance, static_cast<std::int64_t>(j), ta, tb, best_sq,
                            best)) {
@@ -143,6 +150,10 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
                     best = {static_cast<std::int64_t>(j), ta, tb, 0.0, cp.point_a, cp.point_b};
                 }
             });
+        }
+        if (best_sq < 0.0) {
+            work.exact_tests += tests;
+            return;  // stopped; the query reports its stop status, no partial answer
         }
         if (best.other != NO_OBJECT) {
             best.distance = std::sqrt(best_sq);
@@ -420,13 +431,24 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         }
         // The visitor runs on several threads: per-thread counts would need thread-local storage,
         // so count into a relaxed atomic in small batches.
+        // A stopped query reads as a negative bound: the culler stops its traversal.
         culler.self_pairs(
-            scene, a, [&](std::uint32_t t) { return bests.bound(t); },
+            scene, a,
+            [&](std::uint32_t t) {
+                return work.stopped.load(std::memory_order_relaxed) ? -1.0 : bests.bound(t);
+            },
             [&](std::uint32_t t, std::uint32_t u) {
+                if (work.stopped.load(std::memory_order_relaxed)) {
+                    return;
+                }
                 std::uint64_t count = 0;
                 test(t, u, corners(obj, t), count);
                 if (count != 0) {
-                    tests.fetch_add(count, std::memory_order_relaxed);
+                    // One object is one long traversal: look at the token every 4096 tests.
+                    const auto done = tests.fetch_add(count, std::memory_order_relaxed) + count;
+                    if ((done & 4095U) == 0) {
+                        work.should_stop();
+                    }
                 }
             });
         bests.finish();

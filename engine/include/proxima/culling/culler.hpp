@@ -89,14 +89,17 @@ class Culler {
     virtual void prepare(const Scene& scene) = 0;
 
     // Calls visit(ta, tb) for every triangle pair (ta of object a, tb of object b, a != b) that
-    // may be closer than sqrt(bound_sq). The visitor may lower bound_sq.
+    // may be closer than sqrt(bound_sq). The visitor may lower bound_sq; a negative bound_sq asks
+    // the traversal to stop (a cancelled query): every culler returns soon after, the brute-force
+    // one after the current triangle of a.
     virtual void nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
                                  PairVisitor visit) const = 0;
 
     // Calls visit(t, u), t < u, for every pair of object a's triangles that share no vertex and
     // may be closer than the larger of their two current bounds (`bound_sq(t)`, which the visitor
     // may lower as it goes). Bounds are read as the traversal proceeds; a stale (larger) bound
-    // only costs speed. May call `visit` from several threads at once.
+    // only costs speed. May call `visit` from several threads at once. A negative bound asks the
+    // traversal to stop (the brute-force culler checks it once per triangle t).
     virtual void self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_sq,
                             PairVisitor visit) const = 0;
 
