@@ -274,7 +274,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
             final = stop_status(m_cancel, m_what);  // cancelled: both paths cancel the token
         } else if (m_error) {
             // A bad request: what was answered before it still reaches the client (unless the
-            // stream was failed at once).
+            // stream was failed at once); nothing new is queued meanwhile.
             on_closing_locked();
             if (!m_overflowed && write_next_locked()) {
                 return;

@@ -540,7 +540,9 @@ int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
     client::ReviewJoin join;
     join.room = args.room;
     join.model = args.model;
-    join.member = args.member;
+    // Worked out only here, not for every command line that is parsed.
+    const std::string member = args.member.empty() ? default_member_name() : args.member;
+    join.member = member;
     join.avatar = {"avatar", avatar};
     join.tolerance = args.tolerance;
     join.nearest = !args.no_nearest;
@@ -559,7 +561,7 @@ int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
     if (!args.quiet) {
         std::fprintf(stderr, "joined room %s (model %s %s) as %s with %zu other member(s)\n",
                      joined.room.c_str(), joined.model.c_str(), joined.generation.c_str(),
-                     args.member.c_str(), joined.members.size() - 1);
+                     member.c_str(), joined.members.size() - 1);
     }
     client::ProgressPrinter printer(args.quiet);
     nlohmann::json out = nlohmann::json::array();
@@ -602,7 +604,7 @@ int run_review_remote(const ReviewArgs& args, const TriangleMesh& avatar,
                           {"model", args.model},
                           {"generation", joined.generation},
                           {"room", args.room},
-                          {"member", args.member},
+                          {"member", member},
                           {"tolerance", args.tolerance},
                           {"nearest", !args.no_nearest},
                           {"poses", out},
@@ -720,7 +722,6 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
                      "With --server: this member's name in the room (default: USER@HOST-PID, "
                      "unique per client)")
         ->needs(review_server);
-    review_args->member = default_member_name();
     review->add_option("--avatar", review_args->avatar, "The avatar's mesh file (any format)")
         ->required()
         ->check(CLI::ExistingFile);

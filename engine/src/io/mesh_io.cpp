@@ -289,9 +289,12 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
     }
     const std::string extension = lower(std::filesystem::path(path).extension().string());
     const std::string key = extension.empty() ? std::string() : extension.substr(1);
+    // A name no reader claims: its first bytes decide (gzip, PLY or OFF), read once.
+    const std::string head =
+        key == "gz" || is_known_extension(key) ? std::string() : read_head(path);
     // gzip: by extension, or by its magic bytes under a name no reader claims. Decompressed in
     // memory, then read as the file it holds (named by the extension before ".gz").
-    if (key == "gz" || (!is_known_extension(key) && detail::is_gzip(read_head(path)))) {
+    if (key == "gz" || detail::is_gzip(head)) {
         std::string packed;
         if (Status s = read_file(path, packed); !s.ok()) {
             return s;
@@ -308,7 +311,7 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
     const OwnReader own = own_reader(key);
     const bool assimp = !key.empty() && is_assimp_format(key);
     if (format == detail::NativeMeshFormat::none && own == OwnReader::none && !assimp) {
-        format = detail::native_format_from_content(read_head(path));
+        format = detail::native_format_from_content(head);
         if (format == detail::NativeMeshFormat::none) {
             return unsupported_format(path, extension.empty() ? "(no extension)" : extension);
         }

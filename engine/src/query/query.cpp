@@ -128,7 +128,7 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
         Separation best;
         double best_sq = std::numeric_limits<double>::infinity();
         std::uint64_t tests = 0;
-        for (std::size_t j = 0; j < n; ++j) {
+        for (std::size_t j = 0; j < n && best_sq >= 0.0; ++j) {  // negative: stopped
             if (j == i) {
                 continue;
             }
@@ -151,15 +151,14 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
                 }
             });
         }
+        work.exact_tests += tests;
         if (best_sq < 0.0) {
-            work.exact_tests += tests;
             return;  // stopped; the query reports its stop status, no partial answer
         }
         if (best.other != NO_OBJECT) {
             best.distance = std::sqrt(best_sq);
         }
         result.separation[i] = best;
-        work.exact_tests += tests;
     });
     result.stats.object_pairs_tested += n * (n - 1);
 }

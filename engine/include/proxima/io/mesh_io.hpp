@@ -33,7 +33,8 @@ struct MeshReadOptions {
     // corner (STL, and OBJ/PLY files whose corners carry distinct normals or texture coordinates)
     // lose their connectivity otherwise, and every neighbouring triangle would count as a contact.
     bool weld_identical_positions = true;
-    // gzip-compressed files (".ply.gz", or gzip data under any name) are decompressed in memory
+    // gzip-compressed files (".ply.gz", or gzip data under a name no reader claims) are
+    // decompressed in memory
     // up to this many bytes, then read like the file they hold; past it the read fails (a
     // decompression bomb stops here).
     std::uint64_t max_uncompressed_bytes = std::uint64_t{4} << 30;
