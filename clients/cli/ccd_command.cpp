@@ -104,8 +104,8 @@ int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd:
             doc["objects"].push_back({{"name", o.mesh.name},
                                       {"file", o.file},
                                       {"component", o.component},
-                                      {"vertices", o.mesh.mesh.vertices.size()},
-                                      {"triangles", o.mesh.mesh.triangles.size()}});
+                                      {"vertex_count", o.mesh.mesh.vertices.size()},
+                                      {"triangle_count", o.mesh.mesh.triangles.size()}});
         }
         doc["pairs"] = nlohmann::json::array();
         for (const auto& p : r.pairs) {

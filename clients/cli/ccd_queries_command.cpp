@@ -6,8 +6,8 @@
 //                       [--max-boxes N] FILE.csv...
 //
 // JSON: {"results": [bool per query], "toi": [time of impact per query, null when no contact],
-//        "false_negatives": N, "false_positives": N, "seconds": S, "worst_seconds": S,
-//        "capped": N, "queries": N, "kind": "vf" | "ee" | "mixed"}
+//        "false_negative_count": N, "false_positive_count": N, "seconds": S,
+//        "worst_seconds": S, "capped_tests": N, "query_count": N, "kind": "vf" | "ee" | "mixed"}
 // with the queries of all files in order; the false counts are null when no file has the truth
 // column. `seconds` is the time in the elementary tests (reading excluded), single thread.
 
@@ -131,14 +131,14 @@ int run_ccd_queries(const CcdQueriesArgs& args) {
     if (args.output.wanted()) {
         nlohmann::json j = {{"results", std::move(results)},
                             {"toi", std::move(tois)},
-                            {"false_negatives",
+                            {"false_negative_count",
                              have_truth ? nlohmann::json(all.false_negatives) : nlohmann::json()},
-                            {"false_positives",
+                            {"false_positive_count",
                              have_truth ? nlohmann::json(all.false_positives) : nlohmann::json()},
                             {"seconds", all.seconds},
                             {"worst_seconds", worst},
-                            {"capped", all.capped},
-                            {"queries", all.queries},
+                            {"capped_tests", all.capped},
+                            {"query_count", all.queries},
                             {"kind", mixed ? "mixed" : ccd::ccd_kind_name(files.front().kind)}};
         return emit_json(j, args.output,
                          "ccd-queries: " + std::to_string(all.queries) + " queries, " +

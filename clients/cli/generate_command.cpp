@@ -49,6 +49,7 @@ struct GenerateArgs {
     std::string furniture;
     bool verify = false;
     bool quiet = false;
+    JsonOutput output;
 };
 
 template <class T>
@@ -106,19 +107,25 @@ bool same_mesh(const TriangleMesh& a, const TriangleMesh& b) {
     return true;
 }
 
-nlohmann::ordered_json summary_json(const std::string& model, const massive::GeneratedSummary& s,
-                                    const std::string& scene, double seconds) {
+nlohmann::json summary_json(const std::string& model, const massive::GeneratedSummary& s,
+                            const std::string& scene, double seconds) {
     const bool empty = s.box.empty();
     auto point = [&](const Vec3& p) {
-        return empty ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json{p.x, p.y, p.z};
+        return empty ? nlohmann::json(nullptr) : nlohmann::json{p.x, p.y, p.z};
     };
     return {{"model", model},
-            {"objects", s.objects},
-            {"triangles", s.triangles},
-            {"vertices", s.vertices},
+            {"object_count", s.objects},
+            {"triangle_count", s.triangles},
+            {"vertex_count", s.vertices},
             {"box", {{"lo", point(s.box.lo)}, {"hi", point(s.box.hi)}}},
             {"scene", scene},
             {"seconds", seconds}};
+}
+
+// The one-line summary after --out FILE.
+std::string generated_line(const std::string& model, std::uint64_t triangles,
+                           const std::string& dir) {
+    return "generate: " + model + " of " + std::to_string(triangles) + " triangles in " + dir;
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -200,9 +207,8 @@ int run_plant(const GenerateArgs& args) {
             return fail(Status(StatusCode::unavailable, "cannot write '" + scene_file + "'"));
         }
     }
-    std::cout << summary_json("plant", generated.value(), scene_file, seconds_since(start)).dump()
-              << '\n';
-    return 0;
+    return emit_json(summary_json("plant", generated.value(), scene_file, seconds_since(start)),
+                     args.output, generated_line("plant", generated->triangles, args.out));
 }
 
 int run_building(const GenerateArgs& args) {
@@ -221,11 +227,9 @@ int run_building(const GenerateArgs& args) {
     if (!generated.ok()) {
         return fail(generated.status());
     }
-    std::cout << summary_json("building", generated->summary, generated->scene_file,
-                              seconds_since(start))
-                     .dump()
-              << '\n';
-    return 0;
+    return emit_json(
+        summary_json("building", generated->summary, generated->scene_file, seconds_since(start)),
+        args.output, generated_line("building", generated->summary.triangles, args.out));
 }
 
 }  // namespace
@@ -250,10 +254,11 @@ void add_generate_command(CLI::App& app, int& exit_code) {
     plant_cmd->add_option("--seed", plant->seed, "Seed (same options, same model)")
         ->check(whole_number(0, UINT64_MAX))
         ->capture_default_str();
-    plant_cmd->add_option("--out", plant->out, "Output directory")->required();
+    plant_cmd->add_option("--dir", plant->out, "Output directory (created if absent)")->required();
     plant_cmd->add_flag("--verify", plant->verify,
                         "Read every written mesh back and check it is bit-identical");
     plant_cmd->add_flag("--quiet", plant->quiet, "No progress on standard error");
+    add_json_output(*plant_cmd, plant->output, true);
     plant_cmd->callback([plant, &exit_code] { exit_code = run_plant(*plant); });
 
     auto building = std::make_shared<GenerateArgs>();
@@ -275,8 +280,10 @@ void add_generate_command(CLI::App& app, int& exit_code) {
     building_cmd->add_option("--seed", building->seed, "Seed (same options, same model)")
         ->check(whole_number(0, UINT64_MAX))
         ->capture_default_str();
-    building_cmd->add_option("--out", building->out, "Output directory")->required();
+    building_cmd->add_option("--dir", building->out, "Output directory (created if absent)")
+        ->required();
     building_cmd->add_flag("--quiet", building->quiet, "No progress on standard error");
+    add_json_output(*building_cmd, building->output, true);
     building_cmd->callback([building, &exit_code] { exit_code = run_building(*building); });
 }
 

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
+#include "common/json_output.hpp"
 #include "common/progress.hpp"
 #include "proxima/massive/generator.hpp"
 #include "proxima/massive/store.hpp"
@@ -25,12 +26,12 @@ namespace {
 nlohmann::json summary_json(const massive::StoreSummary& s) {
     return {{"store", s.path},
             {"generation", s.generation},
-            {"objects", s.objects},
-            {"pieces", s.pieces},
-            {"split_objects", s.split_objects},
-            {"triangles", s.triangles},
-            {"vertices", s.vertices},
-            {"chunks", s.chunks},
+            {"object_count", s.objects},
+            {"piece_count", s.pieces},
+            {"split_object_count", s.split_objects},
+            {"triangle_count", s.triangles},
+            {"vertex_count", s.vertices},
+            {"chunk_count", s.chunks},
             {"bytes", s.bytes}};
 }
 
@@ -42,6 +43,7 @@ struct ImportArgs {
     std::string plant;
     std::uint64_t seed = 1;
     bool quiet = false;
+    JsonOutput output;
     std::vector<std::string> inputs;
 };
 
@@ -145,8 +147,9 @@ int run_import(const ImportArgs& args) {
     doc["triangles_per_second"] =
         seconds > 0 ? static_cast<double>(summary->triangles) / seconds : 0.0;
     doc["bytes_per_second"] = seconds > 0 ? static_cast<double>(summary->bytes) / seconds : 0.0;
-    std::cout << doc.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
-    return 0;
+    return emit_json(doc, args.output,
+                     "import: " + std::to_string(summary->triangles) + " triangles into " +
+                         args.store + " (" + summary->generation + ")");
 }
 
 struct InfoArgs {
@@ -154,11 +157,8 @@ struct InfoArgs {
     bool verify = false;
     bool objects = false;
     bool quiet = false;
+    JsonOutput output;
 };
-
-nlohmann::json box_json(const Aabb& b) {
-    return {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
-}
 
 int run_store_info(const InfoArgs& args) {
     auto opened = massive::Store::open(args.store);
@@ -176,13 +176,13 @@ int run_store_info(const InfoArgs& args) {
         auto objects = nlohmann::json::array();
         for (const auto& o : store.objects()) {
             objects.push_back({{"name", o.name},
-                               {"box", box_json(o.box)},
-                               {"vertices", o.vertex_count},
-                               {"triangles", o.triangle_count},
+                               {"box", client::box_json(o.box)},
+                               {"vertex_count", o.vertex_count},
+                               {"triangle_count", o.triangle_count},
                                {"first_piece", o.first_piece},
-                               {"pieces", o.piece_count}});
+                               {"piece_count", o.piece_count}});
         }
-        doc["object_list"] = std::move(objects);
+        doc["objects"] = std::move(objects);
     }
     if (args.verify) {
         const auto start = std::chrono::steady_clock::now();
@@ -196,8 +196,8 @@ int run_store_info(const InfoArgs& args) {
         doc["verify_seconds"] =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     }
-    std::cout << doc.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
-    return 0;
+    return emit_json(doc, args.output,
+                     "store-info: " + args.store + " (" + store.summary().generation + ")");
 }
 
 }  // namespace
@@ -229,6 +229,7 @@ void add_import_command(CLI::App& app, int& exit_code) {
         ->capture_default_str()
         ->needs(plant);
     cmd->add_flag("--quiet", args->quiet, "No progress on standard error");
+    add_json_output(*cmd, args->output, true);
     cmd->add_option("inputs", args->inputs, "Mesh files, directories or scene files");
     cmd->callback([args, &exit_code] { exit_code = run_import(*args); });
 
@@ -239,6 +240,7 @@ void add_import_command(CLI::App& app, int& exit_code) {
                    "Read every chunk and check its checksum (exit 1 if one is corrupt)");
     info->add_flag("--objects", info_args->objects, "List the objects");
     info->add_flag("--quiet", info_args->quiet, "No progress on standard error");
+    add_json_output(*info, info_args->output, true);
     info->callback([info_args, &exit_code] { exit_code = run_store_info(*info_args); });
 }
 

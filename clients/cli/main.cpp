@@ -302,12 +302,12 @@ void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
     if (args.json) {
         nlohmann::json j = {
             {"frame", k},
-            {"objects", objects},
-            {"triangles", triangles},
+            {"object_count", objects},
+            {"triangle_count", triangles},
             {"min_separation", std::isfinite(min_sep) ? nlohmann::json(min_sep) : nlohmann::json()},
             {"min_self_distance",
              std::isfinite(min_self) ? nlohmann::json(min_self) : nlohmann::json()},
-            {"collisions", result.collisions.size()},
+            {"collision_count", result.collisions.size()},
             {"stats", client::stats_json(st)}};
         if (round_trip_ms) {
             j["round_trip_ms"] = *round_trip_ms;

@@ -35,6 +35,7 @@
 
 #include "cli/commands.hpp"
 #include "client/proxima_client.hpp"
+#include "common/json_output.hpp"
 #include "common/progress.hpp"
 #include "proxima/io/mesh_io.hpp"
 #include "proxima/massive/avatar.hpp"
@@ -71,7 +72,7 @@ std::string review_summary(const nlohmann::json& doc) {
 }
 
 nlohmann::json vec_json(const Vec3& v) {
-    return nlohmann::json::array({v.x, v.y, v.z});
+    return client::point_json(v);
 }
 
 nlohmann::json cache_json(const massive::CacheStats& c) {
@@ -112,14 +113,14 @@ int run_models(const ModelsArgs& args) {
         for (const auto& m : l.models) {
             models.push_back({{"name", m.name},
                               {"generation", m.generation},
-                              {"objects", m.objects},
-                              {"pieces", m.pieces},
-                              {"split_objects", m.split_objects},
-                              {"triangles", m.triangles},
-                              {"vertices", m.vertices},
-                              {"chunks", m.chunks},
+                              {"object_count", m.objects},
+                              {"piece_count", m.pieces},
+                              {"split_object_count", m.split_objects},
+                              {"triangle_count", m.triangles},
+                              {"vertex_count", m.vertices},
+                              {"chunk_count", m.chunks},
                               {"bytes", m.bytes},
-                              {"box", {{"lo", vec_json(m.box.lo)}, {"hi", vec_json(m.box.hi)}}}});
+                              {"box", client::box_json(m.box)}});
         }
         nlohmann::json unavailable = nlohmann::json::array();
         for (const auto& [name, status] : l.unavailable) {
@@ -177,25 +178,26 @@ struct VerifyArgs {
 
 nlohmann::json pair_json(const massive::ObjectPairResult& p, const std::string& name_a,
                          const std::string& name_b) {
-    return {{"object_a", p.object_a},
-            {"object_b", p.object_b},
-            {"name_a", name_a},
-            {"name_b", name_b},
-            {"distance", p.distance},
-            {"triangle_a", p.triangle_a},
-            {"triangle_b", p.triangle_b},
-            {"point_a", vec_json(p.point_a)},
-            {"point_b", vec_json(p.point_b)}};
+    // The closest-pair shape of every command (docs/api.md, "JSON output"), with the names.
+    return {{"object", p.object_a},
+            {"name", name_a},
+            {"triangle", p.triangle_a},
+            {"point", vec_json(p.point_a)},
+            {"other", p.object_b},
+            {"other_name", name_b},
+            {"other_triangle", p.triangle_b},
+            {"other_point", vec_json(p.point_b)},
+            {"distance", p.distance}};
 }
 
 nlohmann::json verify_stats_json(const massive::VerifyStats& s) {
-    return {{"objects", s.objects},
-            {"pieces", s.pieces},
-            {"model_triangles", s.model_triangles},
-            {"subgraphs", s.subgraphs},
-            {"edges", s.edges},
-            {"object_pairs", s.object_pairs},
-            {"pairs_found", s.pairs_found},
+    return {{"object_count", s.objects},
+            {"piece_count", s.pieces},
+            {"triangle_count", s.model_triangles},
+            {"subgraph_count", s.subgraphs},
+            {"piece_pair_count", s.edges},
+            {"object_pair_count", s.object_pairs},
+            {"pair_count", s.pairs_found},
             {"exact_tests", s.exact_tests},
             {"plan_seconds", s.plan_seconds},
             {"seconds", s.seconds},
@@ -254,8 +256,8 @@ int run_verify_local(const VerifyArgs& args, std::uint64_t cache_bytes) {
         for (const auto& p : pairs.value()) {
             add(p);
         }
-        doc["stats"] = {{"pairs_found", found.pairs.size()},
-                        {"objects", objects.size()},
+        doc["stats"] = {{"pair_count", found.pairs.size()},
+                        {"object_count", objects.size()},
                         {"seconds", seconds_since(start)}};
     } else {
         massive::GeometryCache cache(cache_bytes);
@@ -405,13 +407,14 @@ StatusOr<std::vector<massive::Affine>> read_path(const std::string& file) {
 }
 
 nlohmann::json hit_json(const massive::AvatarHit& h, const std::string& name) {
+    // The closest-pair shape, the avatar being the other side (it has no object index).
     return {{"object", h.object},
             {"name", name},
-            {"distance", h.distance},
-            {"object_triangle", h.object_triangle},
-            {"avatar_triangle", h.avatar_triangle},
-            {"object_point", vec_json(h.object_point)},
-            {"avatar_point", vec_json(h.avatar_point)}};
+            {"triangle", h.object_triangle},
+            {"point", vec_json(h.object_point)},
+            {"other_triangle", h.avatar_triangle},
+            {"other_point", vec_json(h.avatar_point)},
+            {"distance", h.distance}};
 }
 
 // One pose's answer: the same shape in both modes.
@@ -458,7 +461,7 @@ nlohmann::json latency_json(std::vector<double> ms) {
             {"p99", rank(0.99)},
             {"max", ms.back()},
             {"mean", sum / static_cast<double>(ms.size())},
-            {"poses", ms.size()}};
+            {"pose_count", ms.size()}};
 }
 
 void report_progress(client::ProgressPrinter& printer, std::size_t done, std::size_t total) {

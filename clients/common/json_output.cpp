@@ -4,10 +4,21 @@
 
 namespace proxima::client {
 
+nlohmann::json point_json(const Vec3& p) {
+    return nlohmann::json::array({p.x, p.y, p.z});
+}
+
+nlohmann::json box_json(const Aabb& box) {
+    if (box.empty()) {
+        return {{"lo", nullptr}, {"hi", nullptr}};
+    }
+    return {{"lo", point_json(box.lo)}, {"hi", point_json(box.hi)}};
+}
+
 namespace {
 
 nlohmann::json point(const Vec3& p) {
-    return nlohmann::json::array({p.x, p.y, p.z});
+    return point_json(p);
 }
 
 // JSON has no infinity: "no such feature" is null.
@@ -58,26 +69,29 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
     auto& list = out["objects"] = nlohmann::json::array();
     for (std::size_t i = 0; i < objects.size(); ++i) {
         const auto& obj = objects[i];
-        nlohmann::json o = {
-            {"name", obj.mesh.name}, {"file", obj.file}, {"triangles", obj.file_triangle.size()}};
+        nlohmann::json o = {{"name", obj.mesh.name},
+                            {"file", obj.file},
+                            {"triangle_count", obj.file_triangle.size()}};
         if (obj.component >= 0) {
             o["component"] = obj.component;
         }
         if (i < result.separation.size()) {
             const auto& s = result.separation[i];
             if (s.other == NO_OBJECT) {
-                o["separation"] = {{"distance", nullptr}, {"other", nullptr},
-                                   {"triangle", nullptr}, {"other_triangle", nullptr},
-                                   {"point", nullptr},    {"other_point", nullptr}};
+                o["separation"] = {
+                    {"object", i},        {"triangle", nullptr},       {"point", nullptr},
+                    {"other", nullptr},   {"other_triangle", nullptr}, {"other_point", nullptr},
+                    {"distance", nullptr}};
             } else {
                 const auto other = static_cast<std::size_t>(s.other);
                 o["separation"] = {
-                    {"distance", s.distance},
-                    {"other", s.other},
+                    {"object", i},
                     {"triangle", obj.file_triangle[s.triangle]},
-                    {"other_triangle", objects[other].file_triangle[s.other_triangle]},
                     {"point", point(s.point)},
-                    {"other_point", point(s.other_point)}};
+                    {"other", s.other},
+                    {"other_triangle", objects[other].file_triangle[s.other_triangle]},
+                    {"other_point", point(s.other_point)},
+                    {"distance", s.distance}};
             }
         }
         list.push_back(std::move(o));
@@ -88,12 +102,13 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
             const auto& ids = objects[i].file_triangle;
             for (std::size_t t = 0; t < result.self[i].size(); ++t) {
                 const auto& s = result.self[i][t];
-                nlohmann::json e = {{"object", i}, {"triangle", ids[t]}};
+                // A closest pair within one object: `other` is the object itself.
+                nlohmann::json e = {{"object", i}, {"triangle", ids[t]}, {"other", i}};
                 if (s.closest == NO_OBJECT) {
-                    e["closest"] = nullptr;
+                    e["other_triangle"] = nullptr;
                     e["distance"] = nullptr;
                 } else {
-                    e["closest"] = ids[static_cast<std::size_t>(s.closest)];
+                    e["other_triangle"] = ids[static_cast<std::size_t>(s.closest)];
                     e["distance"] = distance_value(s.distance);
                 }
                 self.push_back(std::move(e));

@@ -1,7 +1,10 @@
 #pragma once
-// The JSON shape of `proxima distance --json`, a contract used by external checks: keep the
-// names. Local and server modes both build a QueryResult and print it through here, so the two
-// agree exactly.
+// The CLI's JSON vocabulary (docs/api.md, "JSON output"; the schema docs/json-output.schema.json,
+// checked over every command by tests/cli/test_json_schema.py): a point is [x, y, z], a box
+// {"lo", "hi"}, a closest pair {"object", "triangle", "point", "other", "other_triangle",
+// "other_point", "distance"} (a feature pair is its first part), plural names are arrays and
+// counts are `*_count`. `proxima distance --json` is a contract used by external checks. Local
+// and server modes both build a QueryResult and print it through here, so the two agree exactly.
 
 #include <nlohmann/json.hpp>
 
@@ -10,6 +13,11 @@
 #include "proxima/query/query.hpp"
 
 namespace proxima::client {
+
+// [x, y, z].
+nlohmann::json point_json(const Vec3& p);
+// {"lo": [x, y, z], "hi": [x, y, z]}; both null for an empty box.
+nlohmann::json box_json(const Aabb& box);
 
 struct OutputOptions {
     bool self = false;

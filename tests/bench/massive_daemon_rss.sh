@@ -34,9 +34,9 @@ fi
 python3 - "$work" <<'EOF'
 import json, math, sys
 work = sys.argv[1]
-boxes = [o["box"] for o in json.load(open(f"{work}/info.json"))["object_list"]]
-lo = [min(b[k] for b in boxes) for k in range(3)]
-hi = [max(b[k + 3] for b in boxes) for k in range(3)]
+boxes = [o["box"] for o in json.load(open(f"{work}/info.json"))["objects"]]
+lo = [min(b["lo"][k] for b in boxes) for k in range(3)]
+hi = [max(b["hi"][k] for b in boxes) for k in range(3)]
 n, r = 46, 0.5
 v = [(0, 0, r)]
 for i in range(1, n):

@@ -54,8 +54,8 @@ class Arguments(unittest.TestCase):
             (["demo", "--frames", "0"], "--frames", "whole number from 1 to 100000"),
             (["demo", "--frames", "1.5"], "--frames", "whole number"),
             (["verify", "--store", self.tmp, "--tolerance", "nan"], "--tolerance", "finite"),
-            (["generate", "plant", "--seed", "-1", "--out", self.tmp], "--seed", "whole number"),
-            (["generate", "plant", "--triangles", "nan", "--out", self.tmp], "--triangles",
+            (["generate", "plant", "--seed", "-1", "--dir", self.tmp], "--seed", "whole number"),
+            (["generate", "plant", "--triangles", "nan", "--dir", self.tmp], "--triangles",
              "suffix"),
             (["import", "--store", self.tmp, "--plant", "10Q"], "--plant", "powers of 1000"),
             (["import", "--store", self.tmp, "--chunk-bytes", "-64K", self.a], "--chunk-bytes",
@@ -68,7 +68,7 @@ class Arguments(unittest.TestCase):
                 self.usage_error(PROXIMA, args, option, words)
 
     def test_the_usage_line_names_the_subcommand(self):
-        lines = self.usage_error(PROXIMA, ["generate", "plant", "--seed", "x", "--out", self.tmp],
+        lines = self.usage_error(PROXIMA, ["generate", "plant", "--seed", "x", "--dir", self.tmp],
                                  "--seed", "whole number")
         self.assertEqual(lines[1], "Run 'proxima generate plant --help' for the options.")
 

@@ -50,11 +50,11 @@ class CcdQueries(unittest.TestCase):
         return path
 
     def check_shape(self, doc, n):
-        for key in ("results", "toi", "false_negatives", "false_positives", "seconds"):
+        for key in ("results", "toi", "false_negative_count", "false_positive_count", "seconds"):
             self.assertIn(key, doc)
         self.assertEqual(len(doc["results"]), n)
         self.assertEqual(len(doc["toi"]), n)
-        self.assertEqual(doc["queries"], n)
+        self.assertEqual(doc["query_count"], n)
         for hit, toi in zip(doc["results"], doc["toi"]):
             self.assertIsInstance(hit, bool)
             if hit:
@@ -75,10 +75,10 @@ class CcdQueries(unittest.TestCase):
         truth = [rows[i][6] == "1" for i in range(0, len(rows), 8)]
         self.check_shape(doc, len(truth))
         self.assertEqual(doc["kind"], "ee")
-        self.assertEqual(doc["false_negatives"], 0)
-        self.assertEqual(doc["false_negatives"],
+        self.assertEqual(doc["false_negative_count"], 0)
+        self.assertEqual(doc["false_negative_count"],
                          sum(t and not r for t, r in zip(truth, doc["results"])))
-        self.assertEqual(doc["false_positives"],
+        self.assertEqual(doc["false_positive_count"],
                          sum(r and not t for t, r in zip(truth, doc["results"])))
         # The text summary says the same.
         p = run(path)
@@ -97,8 +97,8 @@ class CcdQueries(unittest.TestCase):
         self.check_shape(doc, 2)
         self.assertEqual(doc["results"], [True, False])
         self.assertTrue(0.5 - 1e-6 <= doc["toi"][0] <= 0.5, doc["toi"])
-        self.assertEqual(doc["false_negatives"], 0)
-        self.assertEqual(doc["false_positives"], 0)
+        self.assertEqual(doc["false_negative_count"], 0)
+        self.assertEqual(doc["false_positive_count"], 0)
         # The kind from the path; six columns (no truth): counts are null.
         os.makedirs(os.path.join(self.tmp, "vertex-face"), exist_ok=True)
         six = self.write(os.path.join("vertex-face", "six.csv"), vf_rows(0.25, None))
@@ -106,7 +106,7 @@ class CcdQueries(unittest.TestCase):
         self.assertEqual(p.returncode, 0, p.stderr)
         doc = json.loads(p.stdout)
         self.assertEqual(doc["results"], [True])
-        self.assertIsNone(doc["false_negatives"])
+        self.assertIsNone(doc["false_negative_count"])
         # Minimum distance: the miss passes 0.18 from the hypotenuse, within 0.5.
         p = run("--json", "--kind", "vf", "--min-distance", "0.5", path)
         self.assertEqual(json.loads(p.stdout)["results"], [True, True])

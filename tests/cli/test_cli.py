@@ -47,8 +47,9 @@ class Cli(unittest.TestCase):
         self.assertEqual(len(doc["objects"]), 2)
         for i, o in enumerate(doc["objects"]):
             s = o["separation"]
-            self.assertEqual(set(s), {"distance", "other", "triangle", "other_triangle", "point",
-                                      "other_point"})
+            self.assertEqual(set(s), {"object", "triangle", "point", "other", "other_triangle",
+                                      "other_point", "distance"})
+            self.assertEqual(s["object"], i)
             self.assertAlmostEqual(s["distance"], 0.5, places=12)
             self.assertEqual(s["other"], 1 - i)
             self.assertEqual(len(s["point"]), 3)
@@ -106,7 +107,8 @@ class Cli(unittest.TestCase):
                             self.two)
         self.assertEqual(len(doc["self"]), 24)
         for e in doc["self"]:
-            self.assertEqual(set(e), {"object", "triangle", "closest", "distance"})
+            self.assertEqual(set(e), {"object", "triangle", "other", "other_triangle", "distance"})
+            self.assertEqual(e["other"], e["object"])
         self.assertEqual(doc["collisions"], [])
         # Opposite faces of a unit box are 1 apart: nothing within 0.3 inside one box; the boxes
         # are 0.25 apart, so some inter-object pairs are within.
@@ -193,7 +195,7 @@ class Cli(unittest.TestCase):
         self.assertEqual(p.returncode, 0, p.stderr)
         lines = [json.loads(x) for x in p.stdout.splitlines()]
         self.assertEqual([x["frame"] for x in lines], [0, 1, 2])
-        self.assertGreater(lines[0]["objects"], 1)
+        self.assertGreater(lines[0]["object_count"], 1)
 
 
 if __name__ == "__main__":

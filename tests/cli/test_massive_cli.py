@@ -89,8 +89,8 @@ class MassiveCli(unittest.TestCase):
         return json.loads(p.stdout)
 
     def test_store_is_split(self):
-        self.assertEqual(self.summary["objects"], 7)
-        self.assertGreater(self.summary["pieces"], 7)
+        self.assertEqual(self.summary["object_count"], 7)
+        self.assertGreater(self.summary["piece_count"], 7)
 
     def test_verify_equals_brute_force(self):
         for tolerance in ("0", "0.1"):
@@ -103,8 +103,8 @@ class MassiveCli(unittest.TestCase):
             # Exact: the same pairs, names, triangles and doubles.
             self.assertEqual(static["pairs"], brute["pairs"], tolerance)
             self.assertGreater(len(static["pairs"]), 0)
-            self.assertEqual(static["stats"]["pairs_found"], len(static["pairs"]))
-            names = {(p["name_a"], p["name_b"]) for p in static["pairs"]}
+            self.assertEqual(static["stats"]["pair_count"], len(static["pairs"]))
+            names = {(p["name"], p["other_name"]) for p in static["pairs"]}
             self.assertTrue(any("floor" in a + b for a, b in names))
             if tolerance == "0.1":
                 self.assertTrue(any(p["distance"] > 0 for p in static["pairs"]))
@@ -140,7 +140,7 @@ class MassiveCli(unittest.TestCase):
             for h in p["within"]:
                 self.assertLessEqual(h["distance"], 0.2)
         lat = doc["latency_ms"]
-        self.assertEqual(lat["poses"], 13)
+        self.assertEqual(lat["pose_count"], 13)
         self.assertLessEqual(lat["p50"], lat["p99"])
         self.assertLessEqual(lat["p99"], lat["max"])
 
@@ -203,7 +203,7 @@ class MassiveCli(unittest.TestCase):
         try:
             models = self.json_of("models", "--server", address, "--json")
             self.assertEqual([m["name"] for m in models["models"]], ["row"])
-            self.assertEqual(models["models"][0]["pieces"], self.summary["pieces"])
+            self.assertEqual(models["models"][0]["piece_count"], self.summary["piece_count"])
             text = run(PROXIMA, "models", "--server", address)
             self.assertIn("row", text.stdout)
             local = self.json_of("verify", "--store", self.store, "--tolerance", "0.1",
@@ -218,7 +218,7 @@ class MassiveCli(unittest.TestCase):
                                   "--room", "cli", "--member", "tester", "--quiet")
             self.assertEqual(strip_stats(remote), strip_stats(local))
             self.assertEqual(remote["room"], "cli")
-            self.assertEqual(remote["latency_ms"]["poses"], 13)
+            self.assertEqual(remote["latency_ms"]["pose_count"], 13)
             # Without --member: a name of its own (USER@HOST-PID), so two reviewers never clash.
             unnamed = self.json_of("review", "--server", address, "--model", "row", "--avatar",
                                    self.avatar, "--path", self.path, "--room", "cli", "--quiet")

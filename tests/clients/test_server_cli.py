@@ -182,7 +182,7 @@ class ServerCli(unittest.TestCase):
                                       server_flags=("--inline-mesh-bytes", inline))
         # Separation only: a tolerance or self query on a fine grid is quadratic in its output.
         doc = self.assert_same_as_local("grid", "a")
-        self.assertEqual(doc["objects"][0]["triangles"], 2 * 227 * 227)
+        self.assertEqual(doc["objects"][0]["triangle_count"], 2 * 227 * 227)
         self.assertAlmostEqual(doc["objects"][0]["separation"]["distance"], 0.1, places=12)
 
     def test_distance_text_mode(self):
@@ -220,8 +220,8 @@ class ServerCli(unittest.TestCase):
         return [json.loads(line) for line in p.stdout.splitlines()]
 
     def test_demo_matches_local(self):
-        keys = ("frame", "objects", "triangles", "min_separation", "min_self_distance",
-                "collisions")
+        keys = ("frame", "object_count", "triangle_count", "min_separation", "min_self_distance",
+                "collision_count")
         # `breaking` replaces objects by fragments mid-sequence: the id translation at work.
         for scene, frames in (("breaking", "6"), ("bowl", "3")):
             local = self.demo_lines("--scene", scene, "--frames", frames)
@@ -234,7 +234,7 @@ class ServerCli(unittest.TestCase):
                 self.assertGreater(x["round_trip_ms"], 0)
                 self.assertGreater(x["stats"]["exact_tests"], 0)
             if scene == "breaking":
-                self.assertGreater(len({x["objects"] for x in local}), 1, "no topology change")
+                self.assertGreater(len({x["object_count"] for x in local}), 1, "no topology change")
         p = run(ARGS.proxima, "demo", "--scene", "bowl", "--frames", "2", "--server",
                 self.daemon.address)
         self.assertEqual(p.returncode, 0, p.stderr)
