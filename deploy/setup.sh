@@ -23,6 +23,8 @@ packages=(
   openssl libssl-dev prometheus-cpp-dev clang libclang-rt-14-dev
   # The lint stage of deploy/test.sh.
   clang-format clang-tidy
+  # The CLI's JSON output against docs/json-output.schema.json (tests/cli/test_json_schema.py).
+  python3-jsonschema
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }

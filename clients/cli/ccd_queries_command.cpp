@@ -5,7 +5,7 @@
 //   proxima ccd-queries [--kind vf|ee] [--json] [--min-distance D] [--tolerance T]
 //                       [--max-boxes N] FILE.csv...
 //
-// JSON: {"results": [bool per query], "toi": [time of impact per query, null when no contact],
+// JSON: {"results": [bool per query], "tois": [time of impact per query, null when no contact],
 //        "false_negative_count": N, "false_positive_count": N, "seconds": S,
 //        "worst_seconds": S, "capped_tests": N, "query_count": N, "kind": "vf" | "ee" | "mixed"}
 // with the queries of all files in order; the false counts are null when no file has the truth
@@ -130,7 +130,7 @@ int run_ccd_queries(const CcdQueriesArgs& args) {
     const bool have_truth = all.with_truth > 0;
     if (args.output.wanted()) {
         nlohmann::json j = {{"results", std::move(results)},
-                            {"toi", std::move(tois)},
+                            {"tois", std::move(tois)},
                             {"false_negative_count",
                              have_truth ? nlohmann::json(all.false_negatives) : nlohmann::json()},
                             {"false_positive_count",

@@ -41,26 +41,25 @@ nlohmann::json pair_json(const std::vector<InputObject>& objects, const FeatureP
 }  // namespace
 
 nlohmann::json stats_json(const QueryStats& s) {
+    // Flat, with the names of the proto's Stats message.
     return {{"culler", s.culler},
-            {"seconds",
-             {{"prepare", s.prepare_seconds},
-              {"broad_phase", s.broad_phase_seconds},
-              {"separation", s.separation_seconds},
-              {"self", s.self_seconds},
-              {"collisions", s.collision_seconds},
-              {"tolerance", s.tolerance_seconds},
-              {"voronoi", s.voronoi_seconds},
-              {"dvd_kernel", s.dvd_seconds},
-              {"total", s.total_seconds}}},
+            {"prepare_seconds", s.prepare_seconds},
+            {"broad_phase_seconds", s.broad_phase_seconds},
+            {"separation_seconds", s.separation_seconds},
+            {"self_seconds", s.self_seconds},
+            {"collision_seconds", s.collision_seconds},
+            {"tolerance_seconds", s.tolerance_seconds},
+            {"voronoi_seconds", s.voronoi_seconds},
+            {"dvd_seconds", s.dvd_seconds},
+            {"total_seconds", s.total_seconds},
             {"exact_tests", s.exact_tests},
             {"brute_force_tests", s.brute_force_tests},
             {"object_pairs_tested", s.object_pairs_tested},
             {"pns_pairs", s.pns_pairs},
-            {"voronoi",
-             {{"samples", s.dvd_samples},
-              {"cell", s.dvd_cell},
-              {"culled", s.voronoi_culled},
-              {"epsilon", s.dvd_epsilon}}}};
+            {"dvd_samples", s.dvd_samples},
+            {"dvd_cell", s.dvd_cell},
+            {"voronoi_culled", s.voronoi_culled},
+            {"dvd_epsilon", s.dvd_epsilon}};
 }
 
 nlohmann::json distance_json(const std::vector<InputObject>& objects, const QueryResult& result,
@@ -102,13 +101,14 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
             const auto& ids = objects[i].file_triangle;
             for (std::size_t t = 0; t < result.self[i].size(); ++t) {
                 const auto& s = result.self[i][t];
-                // A closest pair within one object: `other` is the object itself.
-                nlohmann::json e = {{"object", i}, {"triangle", ids[t]}, {"other", i}};
+                // `closest` (the other triangle, in the same object) is a name of the external
+                // contract of issue #2, kept where the vocabulary would say `other_triangle`.
+                nlohmann::json e = {{"object", i}, {"triangle", ids[t]}};
                 if (s.closest == NO_OBJECT) {
-                    e["other_triangle"] = nullptr;
+                    e["closest"] = nullptr;
                     e["distance"] = nullptr;
                 } else {
-                    e["other_triangle"] = ids[static_cast<std::size_t>(s.closest)];
+                    e["closest"] = ids[static_cast<std::size_t>(s.closest)];
                     e["distance"] = distance_value(s.distance);
                 }
                 self.push_back(std::move(e));
@@ -122,7 +122,8 @@ nlohmann::json distance_json(const std::vector<InputObject>& objects, const Quer
         }
     }
     if (options.tolerance) {
-        auto& c = out["tolerance"] = nlohmann::json::array();
+        // The pairs within the tolerance: `within`, as in review (`tolerance` is the number).
+        auto& c = out["within"] = nlohmann::json::array();
         for (const auto& p : result.tolerance) {
             c.push_back(pair_json(objects, p, true));
         }

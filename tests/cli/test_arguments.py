@@ -89,7 +89,7 @@ class Arguments(unittest.TestCase):
         p = run_program(PROXIMA, "distance", "--tolerance", "0.75", "--voronoi-cell", "0.5",
                         "--culler", "voronoi-cpu", "--json", self.a, self.b)
         self.assertEqual(p.returncode, 0, p.stderr)
-        self.assertIn('"tolerance"', p.stdout)
+        self.assertIn('"within"', p.stdout)
 
     def test_versions(self):
         for program in (PROXIMA, PROXIMAD):

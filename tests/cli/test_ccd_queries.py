@@ -50,12 +50,12 @@ class CcdQueries(unittest.TestCase):
         return path
 
     def check_shape(self, doc, n):
-        for key in ("results", "toi", "false_negative_count", "false_positive_count", "seconds"):
+        for key in ("results", "tois", "false_negative_count", "false_positive_count", "seconds"):
             self.assertIn(key, doc)
         self.assertEqual(len(doc["results"]), n)
-        self.assertEqual(len(doc["toi"]), n)
+        self.assertEqual(len(doc["tois"]), n)
         self.assertEqual(doc["query_count"], n)
-        for hit, toi in zip(doc["results"], doc["toi"]):
+        for hit, toi in zip(doc["results"], doc["tois"]):
             self.assertIsInstance(hit, bool)
             if hit:
                 self.assertTrue(0.0 <= toi <= 1.0, toi)
@@ -96,7 +96,7 @@ class CcdQueries(unittest.TestCase):
         doc = json.loads(p.stdout)
         self.check_shape(doc, 2)
         self.assertEqual(doc["results"], [True, False])
-        self.assertTrue(0.5 - 1e-6 <= doc["toi"][0] <= 0.5, doc["toi"])
+        self.assertTrue(0.5 - 1e-6 <= doc["tois"][0] <= 0.5, doc["tois"])
         self.assertEqual(doc["false_negative_count"], 0)
         self.assertEqual(doc["false_positive_count"], 0)
         # The kind from the path; six columns (no truth): counts are null.

@@ -107,13 +107,12 @@ class Cli(unittest.TestCase):
                             self.two)
         self.assertEqual(len(doc["self"]), 24)
         for e in doc["self"]:
-            self.assertEqual(set(e), {"object", "triangle", "other", "other_triangle", "distance"})
-            self.assertEqual(e["other"], e["object"])
+            self.assertEqual(set(e), {"object", "triangle", "closest", "distance"})
         self.assertEqual(doc["collisions"], [])
         # Opposite faces of a unit box are 1 apart: nothing within 0.3 inside one box; the boxes
         # are 0.25 apart, so some inter-object pairs are within.
-        self.assertTrue(all(p["object"] != p["other"] for p in doc["tolerance"]))
-        self.assertGreater(len(doc["tolerance"]), 0)
+        self.assertTrue(all(p["object"] != p["other"] for p in doc["within"]))
+        self.assertGreater(len(doc["within"]), 0)
 
     def test_crossing_boxes_collide(self):
         c = os.path.join(self.tmp, "c.off")
@@ -149,7 +148,7 @@ class Cli(unittest.TestCase):
             self.assertAlmostEqual(x["separation"]["distance"], y["separation"]["distance"], places=12)
         self.assertEqual([e["distance"] for e in brute["self"]], [e["distance"] for e in bvh["self"]])
         self.assertEqual(brute["collisions"], bvh["collisions"])
-        self.assertEqual(brute["tolerance"], bvh["tolerance"])
+        self.assertEqual(brute["within"], bvh["within"])
 
     def expect_error(self, *args, words=()):
         p = run("distance", "--local", "--json", *args)
