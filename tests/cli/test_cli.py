@@ -57,7 +57,12 @@ class Cli(unittest.TestCase):
             self.assertTrue(0 <= s["triangle"] < 12 and 0 <= s["other_triangle"] < 12)
         self.assertIn("stats", doc)
         self.assertGreater(doc["stats"]["exact_tests"], 0)
-        self.assertEqual(doc["stats"]["brute_force_tests"], 144 + 2 * (66 - 0) - 2 * self.ring_pairs())
+        # Separation alone: brute force tests the 12 x 12 triangle pairs of the one object pair.
+        self.assertEqual(doc["stats"]["brute_force_tests"], 144)
+        # With self too, each box's non-adjacent pairs as well; the brute culler tests exactly that.
+        doc = self.distance("--self", "--culler", "brute", self.a, self.b)
+        self.assertEqual(doc["stats"]["brute_force_tests"], 144 + 2 * (66 - self.ring_pairs()))
+        self.assertEqual(doc["stats"]["exact_tests"], doc["stats"]["brute_force_tests"])
 
     @staticmethod
     def ring_pairs():

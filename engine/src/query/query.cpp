@@ -117,50 +117,81 @@ PairSearch search_pair(const Scene& scene, const Culler& culler, std::size_t i, 
 }
 
 // The brute-force reference: every object against every other, every triangle pair.
+// Separation by brute force: every unordered object pair once, every triangle pair of it once
+// (the brute-force count of the separation query, stats.brute_force_tests), each result offered to
+// both objects as the culled path does, so a scene's exact tests never exceed brute force.
 void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
                           QueryResult& result) {
     const std::size_t n = scene.size();
-    std::atomic<std::uint64_t> object_pairs{0};
-    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-        if (work.should_stop()) {
-            return;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
+    pairs.reserve(n * (n - 1) / 2);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t j = i + 1; j < n; ++j) {
+            pairs.emplace_back(static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j));
         }
-        Separation best;
-        double best_sq = std::numeric_limits<double>::infinity();
-        std::uint64_t tests = 0;
-        for (std::size_t j = 0; j < n && best_sq >= 0.0; ++j) {  // negative: stopped
-            if (j == i) {
-                continue;
+    }
+    std::vector<double> best_sq(n, std::numeric_limits<double>::infinity());
+    std::vector<std::mutex> locks(n);
+    auto offer = [&](std::size_t i, std::int64_t other, std::uint32_t t, std::uint32_t u,
+                     double d_sq, const Vec3& p, const Vec3& q) {
+        std::lock_guard<std::mutex> lock(locks[i]);
+        if (better(d_sq, other, t, u, best_sq[i], result.separation[i])) {
+            best_sq[i] = d_sq;
+            result.separation[i] = {other, t, u, 0.0, p, q};
+        }
+    };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 1), [&](const auto& range) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+            if (work.should_stop()) {
+                return;
             }
+            const auto [i, j] = pairs[k];
             const SceneObject& a = scene[i];
             const SceneObject& b = scene[j];
-            culler.nearest_between(scene, i, j, best_sq, [&](std::uint32_t ta, std::uint32_t tb) {
-                if (best_sq < 0.0) {
-                    return;  // stopped: the culler ends after this triangle of a
+            // The pair's best for each side: the tie-break orders (other, own, other's triangle).
+            Separation for_i;
+            Separation for_j;
+            double sq_i = std::numeric_limits<double>::infinity();
+            double sq_j = sq_i;
+            double stop = sq_i;  // negative: stopped (the culler ends after this triangle of a)
+            std::uint64_t tests = 0;
+            culler.nearest_between(scene, i, j, stop, [&](std::uint32_t ta, std::uint32_t tb) {
+                if (stop < 0.0) {
+                    return;
                 }
                 // Two large objects are one long loop: look at the token every 1024 tests.
                 if ((++tests & 1023U) == 0 && work.should_stop()) {
-                    best_sq = -1.0;
+                    stop = -1.0;
                     return;
                 }
                 const auto cp = triangle_triangle(corners(a, ta), corners(b, tb));
-                if (better(cp.squared_distance, static_cast<std::int64_t>(j), ta, tb, best_sq,
-                           best)) {
-                    best_sq = cp.squared_distance;
-                    best = {static_cast<std::int64_t>(j), ta, tb, 0.0, cp.point_a, cp.point_b};
+                if (better(cp.squared_distance, j, ta, tb, sq_i, for_i)) {
+                    sq_i = cp.squared_distance;
+                    for_i = {static_cast<std::int64_t>(j), ta, tb, 0.0, cp.point_a, cp.point_b};
+                }
+                if (better(cp.squared_distance, i, tb, ta, sq_j, for_j)) {
+                    sq_j = cp.squared_distance;
+                    for_j = {static_cast<std::int64_t>(i), tb, ta, 0.0, cp.point_b, cp.point_a};
                 }
             });
+            work.exact_tests += tests;
+            if (stop < 0.0) {
+                return;  // stopped; the query reports its stop status, no partial answer
+            }
+            if (for_i.other != NO_OBJECT) {
+                offer(i, j, for_i.triangle, for_i.other_triangle, sq_i, for_i.point,
+                      for_i.other_point);
+                offer(j, i, for_j.triangle, for_j.other_triangle, sq_j, for_j.point,
+                      for_j.other_point);
+            }
         }
-        work.exact_tests += tests;
-        if (best_sq < 0.0) {
-            return;  // stopped; the query reports its stop status, no partial answer
-        }
-        if (best.other != NO_OBJECT) {
-            best.distance = std::sqrt(best_sq);
-        }
-        result.separation[i] = best;
     });
-    result.stats.object_pairs_tested += n * (n - 1);
+    for (std::size_t i = 0; i < n; ++i) {
+        if (result.separation[i].other != NO_OBJECT) {
+            result.separation[i].distance = std::sqrt(best_sq[i]);
+        }
+    }
+    result.stats.object_pairs_tested += pairs.size();
 }
 
 // Separation with object-level culling. Stage I gives each object an upper bound (closest box's
@@ -566,14 +597,24 @@ Status run_pairs(const Scene& scene, Culler& culler, const SweepAndPrune& sap, d
     return {};
 }
 
-std::uint64_t brute_force_pairs(const Scene& scene) {
-    std::uint64_t total = 0;
+// The exact tests the brute-force culler makes for `request`: each query asked tests its pairs
+// once (separation: every triangle pair of every object pair; self: every non-adjacent pair inside
+// each object; collisions, tolerance and a PNS-only request: both). No culler tests more
+// (tests/engine/query: Stats.*), and the brute-force culler tests exactly this many.
+std::uint64_t brute_force_tests(const Scene& scene, const QueryRequest& request) {
+    std::uint64_t between = 0;
+    std::uint64_t within = 0;
     std::uint64_t before = 0;
     for (const auto& obj : scene.objects()) {
-        total += before * obj.triangle_count() + non_adjacent_pair_count(*obj.topology);
+        between += before * obj.triangle_count();
+        within += non_adjacent_pair_count(*obj.topology);
         before += obj.triangle_count();
     }
-    return total;
+    const bool pns_only = request.pns && !request.collisions && !request.tolerance;
+    const std::uint64_t pair_queries =
+        (request.collisions ? 1U : 0U) + (request.tolerance ? 1U : 0U) + (pns_only ? 1U : 0U);
+    return (request.separation ? between : 0) + (request.self ? within : 0) +
+           pair_queries * (between + within);
 }
 
 }  // namespace
@@ -791,7 +832,7 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
         return stop_status(*cancel, "query");  // only a token sets `stopped`
     }
     stats.exact_tests = work.exact_tests.load();
-    stats.brute_force_tests = brute_force_pairs(m_scene);
+    stats.brute_force_tests = brute_force_tests(m_scene, request);
     const VoronoiStats vs = culler.take_voronoi_stats();
     stats.voronoi_seconds = vs.seconds;
     stats.dvd_seconds = vs.dvd_seconds;

@@ -143,6 +143,9 @@ void expect_equal_answers(const Scene& scene, const QueryResult& bvh, const Quer
     // Culling never tests more pairs than brute force, except that a pair tested while seeding a
     // triangle's self bound may be tested again (at most one per triangle).
     EXPECT_LE(bvh.stats.exact_tests, brute.stats.exact_tests + scene.triangle_count()) << where;
+    // The brute-force count is the brute-force culler's own count, whatever culler ran.
+    EXPECT_EQ(brute.stats.exact_tests, brute.stats.brute_force_tests) << where;
+    EXPECT_EQ(bvh.stats.brute_force_tests, brute.stats.brute_force_tests) << where;
 }
 
 // 2,000 random scenes in four shards (separate ctest entries, so they run in parallel).
@@ -202,6 +205,58 @@ TEST(QueriesVsBrute, BruteForceMatchesNaiveLoops) {
         }
         EXPECT_TRUE(same_pairs(r->collisions, naive_pairs(s, 0.0, true))) << "seed " << seed;
         EXPECT_TRUE(same_pairs(r->tolerance, naive_pairs(s, tol, false))) << "seed " << seed;
+    }
+}
+
+// stats.brute_force_tests is what the brute-force culler tests for the queries asked (issue #18:
+// with the brute culler it once counted each object pair of the separation query twice, so
+// exact_tests exceeded it): equal with the brute culler for every combination of queries, never
+// exceeded by another culler beyond the self query's seeding allowance (one test per triangle).
+TEST(QueriesVsBrute, TheBruteForceCountIsWhatBruteForceTests) {
+    const CullerKind cullers[] = {CullerKind::brute, CullerKind::bvh, CullerKind::voronoi_cpu};
+    for (std::uint64_t seed = 20000; seed < 20040; ++seed) {
+        Rng rng(seed);
+        const auto meshes = test::random_scene(rng);
+        const double tol = test::uniform(rng, 0.0, 0.2);
+        for (unsigned mask = 1; mask < 32; ++mask) {
+            QueryRequest request;
+            request.separation = (mask & 1U) != 0;
+            request.self = (mask & 2U) != 0;
+            request.collisions = (mask & 4U) != 0;
+            if ((mask & 8U) != 0) {
+                request.tolerance = tol;
+            }
+            request.pns = (mask & 16U) != 0;
+            const bool pns_only = request.pns && !request.collisions && !request.tolerance;
+            std::uint64_t brute_count = 0;
+            for (CullerKind culler : cullers) {
+                ProximityEngine engine;
+                for (const auto& m : meshes) {
+                    ASSERT_TRUE(engine.scene().add_object(m).ok());
+                }
+                request.culler = culler;
+                auto r = engine.query(request);
+                ASSERT_TRUE(r.ok()) << r.status().to_string();
+                const auto& st = r->stats;
+                const std::string where = "seed " + std::to_string(seed) + " queries " +
+                                          std::to_string(mask) + " culler " + culler_name(culler);
+                if (culler == CullerKind::brute) {
+                    brute_count = st.brute_force_tests;
+                    if (pns_only) {
+                        // PNS alone counts candidates, no exact test: brute force's count for it
+                        // is the pairs it would examine.
+                        EXPECT_LT(st.exact_tests, st.brute_force_tests) << where;
+                    } else {
+                        EXPECT_EQ(st.exact_tests, st.brute_force_tests) << where;
+                    }
+                } else {
+                    EXPECT_EQ(st.brute_force_tests, brute_count) << where;
+                    const std::uint64_t seeding =
+                        request.self ? engine.scene().triangle_count() : 0;
+                    EXPECT_LE(st.exact_tests, st.brute_force_tests + seeding) << where;
+                }
+            }
+        }
     }
 }
 

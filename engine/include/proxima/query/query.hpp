@@ -82,8 +82,10 @@ struct QueryStats {
     double total_seconds = 0;
     // Exact primitive tests performed (triangle-triangle distance or intersection).
     std::uint64_t exact_tests = 0;
-    // Tests brute force would perform for the same queries (all object pairs, all non-adjacent
-    // triangle pairs): the denominator of the culling efficiency.
+    // Tests the brute-force culler performs for the same queries, each query once over its pairs
+    // (separation: every triangle pair of every object pair; self: every non-adjacent pair in each
+    // object; collisions, tolerance, PNS alone: both): the denominator of the culling efficiency.
+    // No culler exceeds it but for the self query's bound seeding (at most one test per triangle).
     std::uint64_t brute_force_tests = 0;
     std::uint64_t object_pairs_tested = 0;
     std::uint64_t pns_pairs = 0;
