@@ -3,6 +3,7 @@ import os
 import queue
 import sys
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import (Any, Callable, Iterable, Iterator, List, Optional, Sequence, Tuple, TypeVar,
@@ -236,6 +237,7 @@ class ReviewSession:
         self._held: List[Any] = []  # read while waiting for an answer, not yet taken
         self._sequence = 0
         self._timeout = timeout
+        self._reported = False  # the stream's error was raised to the caller already
         self._requests.put(pb.ReviewRequest(join=pb.ReviewJoin(
             room=room, model=model, member=member, avatar=encode_mesh(avatar),
             tolerance=tolerance, nearest=nearest)))
@@ -269,19 +271,28 @@ class ReviewSession:
                                f"no review event within {timeout:g} s") from None
         if isinstance(item, ProximaError):
             self._events.put(item)  # every later read raises it too
+            self._reported = True
             raise item
         if item is None:
             self._events.put(None)
             raise ProximaError(grpc.StatusCode.CANCELLED, "the review stream has ended")
         return item
 
-    def next_event(self, timeout: Optional[float] = None) -> Any:
+    def next_event(self, timeout: Optional[float] = None, kind: Optional[str] = None) -> Any:
         """The next ReviewEvent (`event.WhichOneof("event")`: "result", "peer", "edit_applied",
-        "member_joined", "member_left"). Raises ProximaError with the stream's status when it
-        ended with an error, CANCELLED when it ended, DEADLINE_EXCEEDED after `timeout` s."""
-        if self._held:
-            return self._held.pop(0)
-        return self._take(timeout)
+        "member_joined", "member_left"), or with `kind` the next one of that kind (the others
+        stay queued, in order). Raises ProximaError with the stream's status when it ended with
+        an error, CANCELLED when it ended, DEADLINE_EXCEEDED after `timeout` s."""
+        for i, event in enumerate(self._held):
+            if kind is None or event.WhichOneof("event") == kind:
+                return self._held.pop(i)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            event = self._take(left)
+            if kind is None or event.WhichOneof("event") == kind:
+                return event
+            self._held.append(event)
 
     def _wait(self, match: Callable[[Any], bool]) -> Any:
         while True:
@@ -342,12 +353,13 @@ class ReviewSession:
 
     def close(self) -> None:
         """Half-closes (the member leaves the room) and waits for the stream's end; raises its
-        error if it ended with one."""
+        error if it ended with one not raised before."""
         self._requests.end()
         self._reader.join(self._timeout)
         while not self._events.empty():
             item = self._events.get()
-            if isinstance(item, ProximaError):
+            if isinstance(item, ProximaError) and not self._reported:
+                self._reported = True
                 raise item
 
     def cancel(self) -> None:
