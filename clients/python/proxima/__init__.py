@@ -12,8 +12,13 @@ Geometry goes in and results come out as numpy arrays; every proto message field
 readable. Failed calls raise ProximaError with the gRPC status code. The generated messages are
 `proxima.pb` (proxima_pb2) and the service stub module `proxima.pb_grpc`.
 """
-from ._pb import proxima_pb2 as pb
-from ._pb import proxima_pb2_grpc as pb_grpc
+try:
+    from ._pb import proxima_pb2 as pb
+    from ._pb import proxima_pb2_grpc as pb_grpc
+except ImportError as _e:  # the source folder itself, which has no generated stubs
+    raise ImportError(
+        f"proxima: no generated stubs next to {__file__}: import the package from the build "
+        "tree (PYTHONPATH=build/<preset>/python) or pip install ./clients/python") from _e
 from .client import (UPLOAD_CHUNK_BYTES, Client, FrameStream, ResultStream, ReviewSession,
                      VerifyResult, VerifyStream, read_token_file)
 from .errors import ProximaError
