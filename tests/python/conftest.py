@@ -1,5 +1,6 @@
-"""Fixtures of the proxima package's tests: one proximad on a free loopback port (the GPU backend where EGL starts, llvmpipe included),
-serving a small massive-model store ("row", written by `proxima import`), and a Client of it.
+"""Fixtures of the proxima package's tests: one proximad on a free loopback port (GPU backend
+where EGL starts, llvmpipe included, else the CPU one) serving a small massive-model store
+("row", written by `proxima import`), and a Client of it.
 
 Environment (set by CTest, tests/python/CMakeLists.txt): PROXIMAD and PROXIMA (the built daemon
 and command-line tool), PYTHONPATH with the build tree's package, PROXIMA_SOURCE_DIR (the repo).

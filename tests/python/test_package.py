@@ -253,7 +253,8 @@ def test_streams_pipelined_and_lockstep(client: proxima.Client) -> None:
     with client.open_stream() as s:
         first = s.query(proxima.make_frame(additions=[A, B]))
         a_id, b_id = first.added_ids
-        halves = [proxima.box("b0", (1.5, 0, 0), (2, 1, 1)), proxima.box("b1", (2, 0, 0), (3, 1, 1))]
+        halves = [proxima.box("b0", (1.5, 0, 0), (2, 1, 1)),
+                  proxima.box("b1", (2, 0, 0), (3, 1, 1))]
         second = s.query(proxima.make_frame(frame=1, topology_changes={b_id: halves}))
         new_ids = proxima.fragment_ids(second)[0]
         assert len(new_ids) == 2 and second.distances.tolist() == [0.5, 0.0, 0.0]
@@ -360,7 +361,8 @@ def test_review_room(client: proxima.Client) -> None:
             added = bob.add(proxima.box("crate", (0.55, 0.3, 19.8), (0.95, 0.7, 20.2)))
             assert added.object == stored and added.model_version == 1
             seen = ann.next_event(10, "edit_applied").edit_applied
-            assert (seen.member, seen.object_name, seen.what) == ("bob", "crate", proxima.pb.EDIT_ADD)
+            assert (seen.member, seen.object_name, seen.what) == \
+                ("bob", "crate", proxima.pb.EDIT_ADD)
             assert [h.object_name for h in bob.pose((0.5, 0.5, 20.0)).collisions] == ["crate"]
             bob.remove(added.object)
             assert ann.next_event(10, "edit_applied").edit_applied.what == proxima.pb.EDIT_DELETE
