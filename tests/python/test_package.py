@@ -377,3 +377,34 @@ def test_review_room(client: proxima.Client) -> None:
     with pytest.raises(proxima.ProximaError) as e:
         client.review("room-2", "nope", "ann", avatar)
     assert e.value.code is grpc.StatusCode.NOT_FOUND
+    # Cancelling a member's stream: it leaves; reads then raise CANCELLED.
+    cy = client.review("room-3", "row", "cy", avatar)
+    cy.cancel()
+    with pytest.raises(proxima.ProximaError) as e:
+        cy.next_event(10)
+    assert e.value.code is grpc.StatusCode.CANCELLED
+
+
+def test_geometry_helpers() -> None:
+    mesh = proxima.grid("g", 3, origin=(1, 2, 3), size=2.0)
+    assert mesh.vertices.shape == (16, 3) and mesh.triangles.shape == (18, 3)
+    assert mesh.triangles.dtype == np.uint32 and mesh.vertices.dtype == np.float64
+    back = proxima.decode_mesh(proxima.encode_mesh(mesh))
+    assert back.name == "g"
+    np.testing.assert_array_equal(back.vertices, mesh.vertices)
+    np.testing.assert_array_equal(back.triangles, mesh.triangles)
+    as32 = proxima.decode_mesh(proxima.encode_mesh(mesh, float32=True))
+    assert as32.vertices.dtype == np.float32
+    moved = mesh.translated((1, 0, 0), name="h")
+    np.testing.assert_array_equal(moved.vertices[:, 0], mesh.vertices[:, 0] + 1)
+    # Lists in, arrays out; transforms from a translation, a (3, 4) or (4, 4) matrix, 12 numbers.
+    assert proxima.Mesh("l", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)]).triangles.shape \
+        == (1, 3)
+    t = proxima.transform((1, 2, 3))
+    np.testing.assert_array_equal(proxima.transform_matrix(t), np.hstack([np.eye(3),
+                                                                          [[1], [2], [3]]]))
+    assert proxima.transform(np.eye(4)).m == proxima.transform(np.eye(4)[:3].ravel()).m
+    with pytest.raises(ValueError):
+        proxima.transform((1, 2))
+    with pytest.raises(ValueError):
+        proxima.Mesh("f", [(0, 0, 0)], [(0.5, 0, 0)])  # float indices

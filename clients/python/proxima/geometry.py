@@ -48,7 +48,7 @@ def as_triangles(triangles: ArrayLike) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.uint32)
 
 
-@dataclass(init=False)
+@dataclass(init=False, eq=False)  # numpy arrays have no single truth value
 class Mesh:
     """An indexed triangle mesh: `name`, `vertices` (N, 3) float64 or float32, `triangles`
     (M, 3) uint32."""
