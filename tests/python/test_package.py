@@ -268,6 +268,13 @@ def test_streams_pipelined_and_lockstep(client: proxima.Client) -> None:
     with pytest.raises(proxima.ProximaError) as e:
         s.receive()
     assert e.value.code is grpc.StatusCode.NOT_FOUND and "12345" in e.value.details
+    s.close()  # the error was raised already: closing does not raise it again
+    # Unread, an error surfaces on close().
+    s = client.open_stream()
+    s.send(proxima.make_frame(scene_id="no-such-scene"))
+    with pytest.raises(proxima.ProximaError) as e:
+        s.close()
+    assert e.value.code is grpc.StatusCode.NOT_FOUND
 
 
 def test_stream_cancellation(client: proxima.Client) -> None:

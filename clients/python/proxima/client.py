@@ -96,6 +96,7 @@ class FrameStream:
         self._requests = _Requests()
         self._responses = stub.StreamFrames(iter(self._requests), metadata=metadata,
                                             timeout=timeout)
+        self._reported = False  # the stream's error was raised to the caller already
 
     def send(self, frame: Any) -> None:
         """Sends a Frame (make_frame); raises ProximaError after close() or cancel()."""
@@ -106,6 +107,7 @@ class FrameStream:
         try:
             return Result(next(self._responses))
         except grpc.RpcError as e:
+            self._reported = True
             raise ProximaError.from_rpc(e) from None
         except StopIteration:
             raise ProximaError(grpc.StatusCode.INTERNAL,
@@ -117,13 +119,16 @@ class FrameStream:
         return self.receive()
 
     def close(self) -> None:
-        """Half-closes and drains: raises the stream's error if it ended with one."""
+        """Half-closes and drains: raises the stream's error if it ended with one not raised
+        before."""
         self._requests.end()
         try:
             for _ in self._responses:
                 pass
         except grpc.RpcError as e:
-            raise ProximaError.from_rpc(e) from None
+            if not self._reported:
+                self._reported = True
+                raise ProximaError.from_rpc(e) from None
 
     def cancel(self) -> None:
         """Cancels the call (the daemon sees CANCELLED; a stream-owned scene goes)."""
