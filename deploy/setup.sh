@@ -19,6 +19,8 @@ packages=(
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev
   libfcl-dev libbullet-dev
   python3 python3-grpcio python3-protobuf python3-numpy binutils
+  # The Python package's tests: pytest, and a venv that pip installs the package into.
+  python3-pytest python3-venv python3-pip python3-setuptools python3-wheel
   # Service hardening: TLS test certificates, Prometheus metrics, libFuzzer targets (clang).
   openssl libssl-dev prometheus-cpp-dev clang libclang-rt-14-dev
   # The lint stage of deploy/test.sh.

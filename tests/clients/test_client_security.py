@@ -8,8 +8,9 @@ tls_cert/tls_key, tls_server_name) and the C++ library through `proxima info` (-
 PROXIMA_TOKEN, --tls-ca, --tls-cert, --tls-key, --tls-server-name), including the failures: an
 untrusted certificate, a name the certificate does not hold, a missing client certificate.
 
-Usage: test_client_security.py --proxima PROXIMA --client-dir clients/python
-(run with an interpreter that has Debian's grpc and google.protobuf modules, /usr/bin/python3)."""
+Usage: test_client_security.py --proxima PROXIMA
+(run with an interpreter that has Debian's grpc, google.protobuf and numpy modules,
+/usr/bin/python3, and the `proxima` package on PYTHONPATH: build/<preset>/python)."""
 import argparse
 import json
 import os
@@ -22,14 +23,12 @@ from concurrent import futures
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--proxima", required=True)
-parser.add_argument("--client-dir", required=True)
 ARGS, UNITTEST_ARGS = parser.parse_known_args()
-sys.path.insert(0, ARGS.client_dir)
 # The fake service's handshake failures are expected here; gRPC would log each one.
 os.environ.setdefault("GRPC_VERBOSITY", "NONE")
 
 import grpc  # noqa: E402
-import proxima_client as pc  # noqa: E402
+import proxima as pc  # noqa: E402
 
 
 class FakeProximity(pc.pb_grpc.ProximityServicer):
@@ -116,25 +115,28 @@ class ClientSecurity(unittest.TestCase):
         with pc.Client(self.tls_address, tls_ca=self.pki["ca.crt"]) as c:
             with self.assertRaises(pc.ProximaError) as e:
                 c.server_info()
-            self.assertEqual(e.exception.code, "UNAUTHENTICATED")
+            self.assertEqual(e.exception.code_name, "UNAUTHENTICATED")
         # The certificate holds DNS:localhost too: checking that name instead of the IP works.
         with pc.Client(self.tls_address, token="t", tls_ca=self.pki["ca.crt"],
                        tls_server_name="localhost") as c:
             self.assertEqual(c.server_info().principal, "Bearer t")
         with self.assertRaises(pc.ProximaError) as e:
             pc.Client(self.tls_address, connect_timeout=2, tls_ca=self.pki["other-ca.crt"])
-        self.assertEqual(e.exception.code, "UNAVAILABLE")
+        self.assertEqual(e.exception.code_name, "UNAVAILABLE")
         # Mutual TLS: with the client's certificate and key only.
         with pc.Client(self.mtls_address, token="m", tls_ca=self.pki["ca.crt"],
                        tls_cert=self.pki["client.crt"], tls_key=self.pki["client.key"]) as c:
             self.assertEqual(c.server_info().principal, "Bearer m")
         with self.assertRaises(pc.ProximaError) as e:
             pc.Client(self.mtls_address, connect_timeout=2, tls_ca=self.pki["ca.crt"])
-        self.assertEqual(e.exception.code, "UNAVAILABLE")
+        self.assertEqual(e.exception.code_name, "UNAVAILABLE")
         with self.assertRaises(pc.ProximaError) as e:
             pc.Client(self.tls_address, tls_ca=self.pki["ca.crt"], tls_cert=self.pki["client.crt"])
-        self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
+        self.assertEqual(e.exception.code_name, "INVALID_ARGUMENT")
         self.assertEqual(pc.read_token_file(self.token_file), "tok-123")
+        with pc.Client(self.tls_address, token_file=self.token_file,
+                       tls_ca=self.pki["ca.crt"]) as c:
+            self.assertEqual(c.server_info().principal, "Bearer tok-123")
 
     def info(self, address, *flags, env=None):
         return run("info", "--server", address, "--json", *flags, env=env)

@@ -1,15 +1,14 @@
 #!/usr/bin/env python3
 """Two boxes on proximad: create a scene, query their separation, move one box, query again.
 
-    python3 clients/python/example.py HOST:PORT
+    PYTHONPATH=build/release/python python3 clients/python/examples/example.py HOST:PORT
 
-Prints the distance between the boxes before and after the move (0.5, then 0.25).
+(or with the package pip-installed). Prints the distance between the boxes before and after the
+move (0.5, then 0.25).
 """
-import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from proxima_client import Client, ProximaError, box  # noqa: E402
+from proxima import Client, ProximaError, box
 
 
 def main(address: str) -> int:
@@ -19,16 +18,16 @@ def main(address: str) -> int:
         scene = client.create_scene([a, b], name="example")
         try:
             result = client.query(scene.scene_id, collisions=True)
-            s = result.separation[0]
-            print(f"distance a-b: {s.distance!r} (triangle {s.triangle} of a, triangle "
-                  f"{s.other_triangle} of b, closest points "
-                  f"({s.point.x:g}, {s.point.y:g}, {s.point.z:g}) and "
-                  f"({s.other_point.x:g}, {s.other_point.y:g}, {s.other_point.z:g}))")
+            s = result.separation[0]  # the proto message; result.distances etc. are numpy
+            (p, q), (t, u) = result.closest_points[0], result.closest_triangles[0]
+            print(f"distance a-b: {s.distance!r} (triangle {t} of a, triangle {u} of b, "
+                  f"closest points ({p[0]:g}, {p[1]:g}, {p[2]:g}) and "
+                  f"({q[0]:g}, {q[1]:g}, {q[2]:g}))")
             # A frame with new positions for b (same vertex count and order), by its daemon id.
             b_id = scene.objects[1].id
-            moved = [(x - 0.25, y, z) for x, y, z in b.vertices]
+            moved = b.vertices - [0.25, 0, 0]  # an (8, 3) numpy array
             result = client.query(scene.scene_id, frame=1, positions={b_id: moved})
-            print(f"after moving b by -0.25 in x: distance a-b: {result.separation[0].distance!r}")
+            print(f"after moving b by -0.25 in x: distance a-b: {result.distances[0]!r}")
         finally:
             client.delete_scene(scene.scene_id)
     return 0
