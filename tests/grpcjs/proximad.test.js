@@ -540,7 +540,7 @@ test('deadline: a long query ends with DEADLINE_EXCEEDED and the daemon goes on'
 
 test('message sizes: grpc-js refuses a result over its 4 MiB default, a raised limit takes it', async () => {
   // Two objects of 700 triangles each with every triangle pair within the tolerance: 979,300
-  // FeaturePairs (700 x 700 between the objects, 2 x 700 x 699 / 2 within them), about 20 MB.
+  // FeaturePairs (700 x 700 between the objects, 2 x 700 x 699 / 2 within them), about 18 MB.
   const rand = mulberry32(11);
   const objects = [randomSoup(rand, 700, 0, 0.1), randomSoup(rand, 700, 0, 0.1)];
   const scene = await unary(c.proximity, 'CreateScene', { objects: objects.map((m, i) => mesh(`o${i}`, m)) });
