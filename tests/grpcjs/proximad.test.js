@@ -591,3 +591,22 @@ test('tokens: authorization metadata; health needs none', async () => {
     fs.rmSync(dir, { recursive: true, force: true });
   }
 });
+
+test("docs/api.md's grpc-js example runs as printed", async () => {
+  const doc = fs.readFileSync(path.join(ROOT, 'docs', 'api.md'), 'utf8');
+  const block = /```js\n([\s\S]*?)```/.exec(doc);
+  assert.ok(block, 'docs/api.md has a ```js block');
+  const script = `const address = ${JSON.stringify(daemon.address)};\n${block[1]}`;
+  const out = await new Promise((resolve, reject) => {
+    const child = spawn(process.execPath, ['-e', script], {
+      cwd: ROOT, env: { ...process.env, NODE_PATH: path.join(__dirname, 'node_modules') },
+      stdio: ['ignore', 'pipe', 'pipe'],
+    });
+    let stdout = '';
+    let stderr = '';
+    child.stdout.on('data', (d) => { stdout += d; });
+    child.stderr.on('data', (d) => { stderr += d; });
+    child.on('exit', (code) => (code === 0 ? resolve(stdout) : reject(new Error(`exit ${code}: ${stderr}`))));
+  });
+  assert.equal(out, 'distance 0.5\n');
+});
