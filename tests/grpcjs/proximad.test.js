@@ -314,6 +314,16 @@ test('reflection: grpc.reflection.v1alpha lists the services and serves the prot
   assert.equal(file.message_response, 'file_descriptor_response');
   assert.ok(file.file_descriptor_response.file_descriptor_proto[0].includes('proxima/v1/proxima.proto'));
   assert.equal((await s.close()).code, status.OK);
+  // Only v1alpha: the v1 service of newer gRPC releases is not there.
+  const raw = new grpc.Client(daemon.address, grpc.credentials.createInsecure());
+  const v1 = raw.makeBidiStreamRequest('/grpc.reflection.v1.ServerReflection/ServerReflectionInfo',
+                                       () => Buffer.from([0x3a, 0]), (b) => b);  // list_services: ""
+  const v1Status = new Promise((resolve) => v1.on('status', resolve));
+  v1.on('error', () => {});
+  v1.write({});
+  v1.end();
+  assert.equal((await v1Status).code, status.UNIMPLEMENTED);
+  raw.close();
 });
 
 test('CreateScene, DescribeScene, Query: two unit boxes 0.5 apart, exact answers', async () => {
