@@ -6,6 +6,11 @@
 #
 #   bash deploy/setup.sh            # install + build
 #   bash deploy/setup.sh --deps     # install packages only
+#
+# Node.js and npm (for tests/grpcjs, the daemon driven from Node's grpc-js) come from Debian's
+# `nodejs` and `npm` unless `node` / `npm` are already on PATH (a NodeSource `nodejs` brings its
+# own npm, and Debian's `npm` would conflict with it); then `npm ci` installs the pinned packages
+# of tests/grpcjs/package-lock.json into tests/grpcjs/node_modules.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -46,6 +51,8 @@ run_quiet() {
 
 install_packages() {
   local missing=()
+  command -v node >/dev/null 2>&1 || packages+=(nodejs)
+  command -v npm >/dev/null 2>&1 || packages+=(npm)
   for p in "${packages[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed'; then
       missing+=("$p")
@@ -65,6 +72,23 @@ install_packages() {
   run_quiet apt-get install -y -q --no-install-recommends "${missing[@]}"
 }
 
+npm_packages() {
+  # `npm ci` from the lockfile, skipped while node_modules holds that lockfile's install.
+  local dir="$here/tests/grpcjs"
+  local stamp="$dir/node_modules/.proxima-package-lock.sha256"
+  local want
+  want="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
+  if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+    log "tests/grpcjs: node_modules matches package-lock.json"
+    return
+  fi
+  log "tests/grpcjs: npm ci (node $(node --version), npm $(npm --version))"
+  cd "$dir"
+  run_quiet npm ci --no-audit --no-fund
+  cd "$here"
+  printf '%s\n' "$want" >"$stamp"
+}
+
 build() {
   cd "$here"
   log "configuring (preset $preset)"
@@ -80,6 +104,7 @@ build() {
 }
 
 install_packages
+npm_packages
 if [ "${1:-}" != "--deps" ]; then
   build
 fi
