@@ -77,7 +77,7 @@ CLI::Validator size_text(std::uint64_t base, bool allow_zero) {
                 text = std::to_string(v.value());  // kept by transform(), not by check()
                 return {};
             },
-            base == 1024 ? "SIZE (K/M/G/T = 1024^n)" : "COUNT (K/M/G = 1000^n)", "size_text"};
+            base == 1024 ? "SIZE (K/M/G/T = 1024^n)" : "SIZE (K/M/G/T = 1000^n)", "size_text"};
 }
 
 namespace {

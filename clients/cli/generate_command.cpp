@@ -33,11 +33,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// "15M" -> 15,000,000 (a count: powers of 1000), at most 10^12.
+// "15M" -> 15 * 2^20 (the one size rule: K, M, G, T are powers of 1024), at most 2^40.
 StatusOr<std::uint64_t> parse_triangles(const std::string& text) {
-    auto n = parse_size("--triangles", text, 1000);
-    if (n.ok() && *n > 1'000'000'000'000ull) {
-        return invalid_argument("--triangles '" + text + "': at most 1T (10^12) triangles");
+    auto n = parse_size("--triangles", text, 1024);
+    if (n.ok() && *n > (std::uint64_t{1} << 40)) {
+        return invalid_argument("--triangles '" + text + "': at most 1T (2^40) triangles");
     }
     return n;
 }
@@ -247,9 +247,8 @@ void add_generate_command(CLI::App& app, int& exit_code) {
         "per object under OUT/meshes and OUT/scene.json");
     plant_cmd
         ->add_option("--triangles", plant->triangles,
-                     "Approximate triangle count (within 10%); K, M, G: thousand, million, "
-                     "billion")
-        ->check(size_text(1000))
+                     "Approximate triangle count (within 10%); K, M, G: powers of 1024")
+        ->check(size_text(1024))
         ->capture_default_str();
     plant_cmd->add_option("--seed", plant->seed, "Seed (same options, same model)")
         ->check(whole_number(0, UINT64_MAX))
@@ -273,9 +272,8 @@ void add_generate_command(CLI::App& app, int& exit_code) {
         ->required();
     building_cmd
         ->add_option("--triangles", building->triangles,
-                     "Approximate triangle count, furniture included; K, M, G: thousand, "
-                     "million, billion")
-        ->check(size_text(1000))
+                     "Approximate triangle count, furniture included; K, M, G: powers of 1024")
+        ->check(size_text(1024))
         ->capture_default_str();
     building_cmd->add_option("--seed", building->seed, "Seed (same options, same model)")
         ->check(whole_number(0, UINT64_MAX))

@@ -50,7 +50,7 @@ struct ImportArgs {
 StatusOr<massive::StoreSummary> import_plant(const ImportArgs& args,
                                              const massive::StoreOptions& options,
                                              client::ProgressPrinter& printer) {
-    auto triangles = parse_size("--plant", args.plant, 1000);
+    auto triangles = parse_size("--plant", args.plant, 1024);
     if (!triangles.ok()) {
         return triangles.status();
     }
@@ -105,7 +105,7 @@ int run_import(const ImportArgs& args) {
             options.source += input;
         }
     } else {
-        auto triangles = parse_size("--plant", args.plant, 1000);
+        auto triangles = parse_size("--plant", args.plant, 1024);
         if (!triangles.ok()) {
             return fail(triangles.status());
         }
@@ -222,8 +222,8 @@ void add_import_command(CLI::App& app, int& exit_code) {
         ->default_str(std::to_string(massive::StoreOptions{}.chunk_bytes));
     auto* plant = cmd->add_option("--plant", args->plant,
                                   "Generate a plant of about this many triangles (K, M, G: "
-                                  "thousand, million, billion) instead of reading files")
-                      ->check(size_text(1000));
+                                  "powers of 1024) instead of reading files")
+                      ->check(size_text(1024));
     cmd->add_option("--seed", args->seed, "Seed of the generated plant")
         ->check(whole_number(0, UINT64_MAX))
         ->capture_default_str()

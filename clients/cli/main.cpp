@@ -279,6 +279,8 @@ struct DemoArgs {
     std::string scene = "cloth-ball";
     std::size_t frames = 8;
     bool json = false;
+    std::string out;              // --out FILE: the JSON lines go there instead of stdout
+    std::FILE* sink = nullptr;    // where the JSON lines go (set by run_demo)
     std::string culler = "auto";
     std::string server;
     cli::ServerFlags server_flags;
@@ -312,7 +314,10 @@ void print_demo_frame(const DemoArgs& args, std::size_t k, std::size_t objects,
         if (round_trip_ms) {
             j["round_trip_ms"] = *round_trip_ms;
         }
-        std::cout << j.dump() << std::endl;  // one line per frame, as it completes
+        // One line per frame, as it completes.
+        const std::string line = j.dump() + "\n";
+        std::fwrite(line.data(), 1, line.size(), args.sink != nullptr ? args.sink : stdout);
+        std::fflush(args.sink != nullptr ? args.sink : stdout);
         return;
     }
     std::printf("%5zu %7zu %9zu %12.6g %12.6g %10zu %12llu %9.2f", k, objects, triangles, min_sep,
@@ -564,7 +569,34 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
     return 0;
 }
 
-int run_demo(const DemoArgs& args) {
+int run_demo_to(const DemoArgs& args);
+
+// --out FILE: the JSON lines into FILE, then a one-line summary on standard error.
+int run_demo(const DemoArgs& given) {
+    if (given.out.empty()) {
+        return run_demo_to(given);
+    }
+    DemoArgs args = given;
+    args.json = true;
+    args.sink = std::fopen(args.out.c_str(), "wb");
+    if (args.sink == nullptr) {
+        std::fprintf(stderr, "proxima: error: cannot write '%s'\n", args.out.c_str());
+        return 1;
+    }
+    const int code = run_demo_to(args);
+    const bool written = std::ferror(args.sink) == 0;
+    if (std::fclose(args.sink) != 0 || !written) {
+        std::fprintf(stderr, "proxima: error: cannot write '%s'\n", args.out.c_str());
+        return 1;
+    }
+    if (code == 0) {
+        std::fprintf(stderr, "demo: %zu frames of %s; JSON in %s\n", args.frames,
+                     args.scene.c_str(), args.out.c_str());
+    }
+    return code;
+}
+
+int run_demo_to(const DemoArgs& args) {
     auto culler = parse_culler(args.culler);
     if (!culler.ok()) {
         return fail(culler.status());
@@ -725,7 +757,11 @@ int main(int argc, char** argv) {
         auto* demo_server = demo->add_option(
             "--server", demo_args.server, "Stream the frames to the proximad daemon at HOST:PORT");
         cli::add_server_flags(*demo, demo_args.server_flags, demo_server);
-        demo->add_flag("--json", demo_args.json, "One JSON object per frame");
+        demo->add_flag("--json", demo_args.json, "One JSON object per frame on standard output");
+        demo->add_option("--out", demo_args.out,
+                         "Write the JSON lines to FILE instead (a one-line summary on standard "
+                         "error)")
+            ->type_name("FILE");
 
         InfoArgs info_args;
         auto* info = app.add_subcommand("info", "Show a proximad daemon's version and limits");

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The argument layer of both programs as a user meets it: every numeric parameter refuses nan,
 inf and out-of-range values with one line in the project's words and exit status 2 (a usage
-error) before anything runs; sizes take K/M/G/T suffixes (powers of 1024 for bytes, 1000 for
+error) before anything runs; sizes take K/M/G/T suffixes (powers of 1024, bytes and
 triangle counts) in both programs; --version works; a good value still runs (exit 0).
 
 Usage: test_arguments.py PROXIMA PROXIMAD"""
@@ -57,7 +57,7 @@ class Arguments(unittest.TestCase):
             (["generate", "plant", "--seed", "-1", "--dir", self.tmp], "--seed", "whole number"),
             (["generate", "plant", "--triangles", "nan", "--dir", self.tmp], "--triangles",
              "suffix"),
-            (["import", "--store", self.tmp, "--plant", "10Q"], "--plant", "powers of 1000"),
+            (["import", "--store", self.tmp, "--plant", "10Q"], "--plant", "powers of 1024"),
             (["import", "--store", self.tmp, "--chunk-bytes", "-64K", self.a], "--chunk-bytes",
              "powers of 1024"),
             (["distance", "--server", "127.0.0.1:1", "--inline-mesh-bytes", "lots", self.a],

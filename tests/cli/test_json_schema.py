@@ -151,12 +151,12 @@ class JsonOutput(unittest.TestCase):
             name = "-".join(a.strip("-") for a in args[:3] if "/" not in a)
             with open(os.path.join(self.samples, f"{command}--{name}.json"), "w") as f:
                 json.dump(docs if lines else docs[0], f, indent=1)
-        if not lines:
-            self.check_out_file(out_args or args, docs[0])
+        self.check_out_file(out_args or args, docs, lines)
         return docs if lines else docs[0]
 
-    def check_out_file(self, args, doc):
-        """The same command with --out FILE instead of --json: the same document in the file."""
+    def check_out_file(self, args, docs, lines):
+        """The same command with --out FILE instead of --json: the same document(s) in the file,
+        one line each."""
         target = os.path.join(self.tmp, "out.json")
         if os.path.exists(target):
             os.remove(target)
@@ -170,10 +170,10 @@ class JsonOutput(unittest.TestCase):
         self.assertTrue(err[0].endswith(f"; JSON in {target}"), err[0])
         with open(target) as f:
             text = f.read()
-        self.assertEqual(text.count("\n"), 1, "one line in the file")
-        written = json.loads(text)
+        self.assertEqual(text.count("\n"), len(docs), "one line per document in the file")
+        written = [json.loads(x) for x in text.splitlines()]
         # Timings differ from run to run; the answer and the shape do not.
-        self.assertEqual(strip_times(written), strip_times(doc), f"{argv}: --out vs --json")
+        self.assertEqual(strip_times(written), strip_times(docs), f"{argv}: --out vs --json")
 
     def test_the_schema_rejects_the_old_shapes(self):
         """The schema is strict: the shapes the vocabulary replaced do not validate."""

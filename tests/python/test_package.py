@@ -1,6 +1,9 @@
 """The proxima package against a live proximad (conftest.py): scenes, uploads, every query and
 culler against brute force, float32, CCD, penetration, streams and their cancellation, errors
 with their status codes, massive models (list, verify, review rooms)."""
+import json
+import re
+import subprocess
 import threading
 import time
 from pathlib import Path
@@ -11,7 +14,7 @@ import numpy as np
 import pytest
 
 import proxima
-from conftest import local_verify
+from conftest import Daemon, box_mesh, local_verify, tool, write_off
 
 A = proxima.box("a", (0, 0, 0), (1, 1, 1))
 B = proxima.box("b", (1.5, 0, 0), (2.5, 1, 1))
@@ -319,7 +322,7 @@ def test_models_and_verify(client: proxima.Client, models: Path) -> None:
     reference = local_verify(models / "row", 0.1)
     assert [(p.name_a, p.name_b, p.triangle_a, p.triangle_b, p.distance)
             for p in result.pairs] == \
-        [(p["name_a"], p["name_b"], p["triangle_a"], p["triangle_b"], p["distance"])
+        [(p["name"], p["other_name"], p["triangle"], p["other_triangle"], p["distance"])
          for p in reference]
     assert result.summary.pairs_found == len(result.pairs) > 0
     assert result.object_pairs.shape == (len(result.pairs), 2)
@@ -415,3 +418,32 @@ def test_geometry_helpers() -> None:
         proxima.transform((1, 2))
     with pytest.raises(ValueError):
         proxima.Mesh("f", [(0, 0, 0)], [(0.5, 0, 0)])  # float indices
+
+
+def test_review_cli_member_names(client: proxima.Client, daemon: Daemon,
+                                 tmp_path: Path) -> None:
+    """`proxima review --server`: a member name taken in the room is exit 1 with a hint to pass
+    --member; the default name is USER@HOST-PID, so two clients without --member both join."""
+    avatar_file, path_file = tmp_path / "avatar.off", tmp_path / "path.txt"
+    write_off(str(avatar_file), [box_mesh((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))])
+    path_file.write_text("".join(f"{0.5 + 0.1 * k}, 0.5, 0.5\n" for k in range(40)))
+    review = [tool("proxima"), "review", "--server", daemon.address, "--model", "row",
+              "--room", "room-cli", "--avatar", str(avatar_file), "--path", str(path_file),
+              "--tolerance", "0.1", "--quiet"]
+    avatar = proxima.box("avatar", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))
+    with client.review("room-cli", "row", "dana", avatar):
+        p = subprocess.run(review + ["--member", "dana"], capture_output=True, text=True,
+                           timeout=120)
+        assert p.returncode == 1, p.stderr
+        assert "dana" in p.stderr and "--member NAME" in p.stderr, p.stderr
+        assert p.stdout == ""
+        # Two clients at once with the default name: both join, under different names.
+        runs = [subprocess.Popen(review, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                 text=True) for _ in range(2)]
+        outs = [r.communicate(timeout=120) for r in runs]
+        for r, (out, err) in zip(runs, outs):
+            assert r.returncode == 0, err
+        names = [json.loads(out)["member"] for out, _ in outs]
+        assert names[0] != names[1], names
+        for name in names:
+            assert re.fullmatch(r"[^@\s]+@[^@\s]+-\d+", name), name

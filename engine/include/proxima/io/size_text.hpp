@@ -10,8 +10,8 @@
 namespace proxima {
 
 // A size with an optional K, M, G or T suffix (any case; "KB", "KiB" and a bare "B" accepted),
-// scaled by powers of `base`: 1024 for bytes; 1000 for counts of things (triangles), where
-// "15M" means fifteen million as in the docs' figures. A fraction is allowed before a suffix
+// scaled by powers of `base`: both programs use 1024 for every size, bytes and counts of things
+// (triangles) alike (README, "Exit status"). A fraction is allowed before a suffix
 // ("1.5G"); the result is rounded to a whole number. INVALID_ARGUMENT naming `what`
 // ("--cache-bytes") for anything else: no digits, an unknown suffix, nan or inf, below 1 or above
 // 2^64 - 1.
