@@ -515,7 +515,7 @@ bool store_verifies(const fs::path& store, const fs::path& logs, std::string* wh
                         std::nullopt});
     const int code = child.exit_code();
     *why = child.out() + child.err();
-    return code == 0 && child.out().find("\"verified\": true") != std::string::npos;
+    return code == 0 && child.out().find("\"verified\":true") != std::string::npos;  // one line
 }
 
 // What a daemon serves for one model: its generation and a whole verification's answer.
