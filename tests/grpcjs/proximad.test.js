@@ -35,8 +35,12 @@ const ROOT = path.resolve(__dirname, '..', '..');
 const LOAD_OPTIONS = { keepCase: true, longs: String, enums: String, defaults: true, oneofs: true };
 const load = (file) => grpc.loadPackageDefinition(protoLoader.loadSync(file, LOAD_OPTIONS));
 const proxima = load(path.join(ROOT, 'proto', 'proxima', 'v1', 'proxima.proto')).proxima.v1;
-const health = load(path.join(__dirname, 'protos', 'health.proto')).grpc.health.v1;
-const reflection = load(path.join(__dirname, 'protos', 'reflection.proto')).grpc.reflection.v1alpha;
+// The standard services' definitions, as their npm packages (pinned in package-lock.json) ship them.
+const MODULES = path.join(__dirname, 'node_modules');
+const health = load(path.join(MODULES, 'grpc-health-check', 'proto', 'health', 'v1', 'health.proto'))
+  .grpc.health.v1;
+const reflection = load(path.join(MODULES, '@grpc', 'reflection', 'build', 'proto', 'grpc',
+  'reflection', 'v1alpha', 'reflection.proto')).grpc.reflection.v1alpha;
 const { status } = grpc;
 
 // --- the daemon ----------------------------------------------------------------------------
