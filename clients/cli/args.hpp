@@ -27,9 +27,9 @@ inline CLI::Validator positive_number() {
 // A whole number (digits only) from `lo` to `hi`.
 CLI::Validator whole_number(std::uint64_t lo, std::uint64_t hi);
 // A size as proxima::parse_size reads it (K, M, G, T powers of `base`: 1024 for every size the
-// programs take, bytes and triangle counts alike), checked when the command line is parsed. As a transform() it also
-// rewrites the text to the whole number, for options parsed into an integer. `allow_zero`: "0"
-// is a value too (--inline-mesh-bytes 0: upload every object).
+// programs take, bytes and triangle counts alike), checked when the command line is parsed. As a
+// transform() it also rewrites the text to the whole number, for options parsed into an integer.
+// `allow_zero`: "0" is a value too (--inline-mesh-bytes 0: upload every object).
 CLI::Validator size_text(std::uint64_t base, bool allow_zero = false);
 
 // Parses the command line. Returns -1 when the command should run; otherwise the exit status:

@@ -279,8 +279,8 @@ struct DemoArgs {
     std::string scene = "cloth-ball";
     std::size_t frames = 8;
     bool json = false;
-    std::string out;              // --out FILE: the JSON lines go there instead of stdout
-    std::FILE* sink = nullptr;    // where the JSON lines go (set by run_demo)
+    std::string out;            // --out FILE: the JSON lines go there instead of stdout
+    std::FILE* sink = nullptr;  // where the JSON lines go (set by run_demo)
     std::string culler = "auto";
     std::string server;
     cli::ServerFlags server_flags;
