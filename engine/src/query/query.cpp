@@ -145,7 +145,8 @@ void run_separation_brute(const Scene& scene, const Culler& culler, Work& work,
             if (work.should_stop()) {
                 return;
             }
-            const auto [i, j] = pairs[k];
+            const std::uint32_t i = pairs[k].first;  // (no structured binding: captured below)
+            const std::uint32_t j = pairs[k].second;
             const SceneObject& a = scene[i];
             const SceneObject& b = scene[j];
             // The pair's best for each side: the tie-break orders (other, own, other's triangle).
