@@ -21,6 +21,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -250,6 +251,25 @@ int main(int argc, char** argv) {
             static_cast<unsigned long long>(st.brute_force_tests), last.pairs.size(), vf,
             static_cast<unsigned long long>(st.capped_tests), earliest, bench::median(broad),
             bench::median(narrow), bench::median(total));
+        // A digest of the result (pairs, times of impact, capped flags), to compare builds.
+        std::uint64_t digest = 1469598103934665603ull;
+        auto mix = [&digest](std::uint64_t x) {
+            for (int b = 0; b < 8; ++b) {
+                digest = (digest ^ ((x >> (8 * b)) & 0xff)) * 1099511628211ull;
+            }
+        };
+        for (const auto& p : last.pairs) {
+            std::uint64_t toi_bits = 0;
+            std::memcpy(&toi_bits, &p.toi, sizeof toi_bits);
+            mix(static_cast<std::uint64_t>(p.kind));
+            mix(p.object);
+            mix(p.primitive);
+            mix(p.other);
+            mix(p.other_primitive);
+            mix(toi_bits);
+            mix(p.capped ? 1 : 0);
+        }
+        std::printf("  result digest %016llx\n", static_cast<unsigned long long>(digest));
         std::fflush(stdout);
         if (opt.check) {
             ccd::CcdRequest other = request;
