@@ -205,22 +205,28 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
     return pr;
 }
 
-// F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
-inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
-                    double f[3][8]) {
+// F_k at the 8 corners of r: fk[4 ti + 2 ui + vi].
+inline void corners_axis(const Problem& pr, int k, const double t[2], const double u[2],
+                         const double v[2], double fk[8]) {
     for (int ti = 0; ti < 2; ++ti) {
         const double tt = t[ti];
         const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
-        for (int k = 0; k < 3; ++k) {
-            const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
-            const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
-            const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
-            for (int ui = 0; ui < 2; ++ui) {
-                const double h = g0 - u[ui] * gu;
-                f[k][4 * ti + 2 * ui + 0] = h - v[0] * gv;
-                f[k][4 * ti + 2 * ui + 1] = h - v[1] * gv;
-            }
+        const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
+        const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
+        const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
+        for (int ui = 0; ui < 2; ++ui) {
+            const double h = g0 - u[ui] * gu;
+            fk[4 * ti + 2 * ui + 0] = h - v[0] * gv;
+            fk[4 * ti + 2 * ui + 1] = h - v[1] * gv;
         }
+    }
+}
+
+// F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
+inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
+                    double f[3][8]) {
+    for (int k = 0; k < 3; ++k) {
+        corners_axis(pr, k, t, u, v, f[k]);
     }
 }
 
@@ -229,16 +235,14 @@ inline bool examine(const Problem& pr, Region& r) {
     const double t[2] = {r.t0, r.t1};
     const double u[2] = {r.u0, r.u1};
     const double v[2] = {r.v0, r.v1};
+    // First the exclusion test, axis by axis, computing an axis' corners only when the axes
+    // before it did not exclude the region (the values are the same either way).
     double f[3][8];
-    corners(pr, t, u, v, f);
-    bool accepted = true;
-    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
-    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
-    double dt = 0.0;
-    double du = 0.0;
-    double dv = 0.0;
+    double los[3];
+    double his[3];
     for (int k = 0; k < 3; ++k) {
-        const double* fk = f[k];
+        double* fk = f[k];
+        corners_axis(pr, k, t, u, v, fk);
         double lo = fk[0];
         double hi = fk[0];
         for (int c = 1; c < 8; ++c) {
@@ -249,6 +253,19 @@ inline bool examine(const Problem& pr, Region& r) {
         if (hi + pr.error[k] < -pr.reject[k] || lo - pr.error[k] > pr.reject[k]) {
             return false;
         }
+        los[k] = lo;
+        his[k] = hi;
+    }
+    bool accepted = true;
+    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
+    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
+    double dt = 0.0;
+    double du = 0.0;
+    double dv = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double* fk = f[k];
+        const double lo = los[k];
+        const double hi = his[k];
         if (hi <= pr.accept[k] && lo >= -pr.accept[k]) {
             continue;  // this axis is within the tolerance
         }
