@@ -90,7 +90,9 @@ TEST(CcdFrames, StreamedFramesMatchInProcessCcd) {
         auto expected = ccd::continuous_collisions(before, t1);
         ASSERT_TRUE(expected.ok()) << expected.status().to_string();
         expect_same_ccd(*got->ccd, expected.value());
-        EXPECT_GT(got->ccd->stats.elementary_tests, 0u);
+        // The broad phase ran and its counts came through (the prefilter may leave no
+        // elementary test: in this scene it rejects every candidate).
+        EXPECT_GT(got->ccd->stats.candidate_pairs, 0u);
         contacts += expected->pairs.size();
     }
     EXPECT_TRUE(stream.value()->finish().ok());

@@ -205,22 +205,28 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
     return pr;
 }
 
-// F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
-inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
-                    double f[3][8]) {
+// F_k at the 8 corners of r: fk[4 ti + 2 ui + vi].
+inline void corners_axis(const Problem& pr, int k, const double t[2], const double u[2],
+                         const double v[2], double fk[8]) {
     for (int ti = 0; ti < 2; ++ti) {
         const double tt = t[ti];
         const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
-        for (int k = 0; k < 3; ++k) {
-            const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
-            const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
-            const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
-            for (int ui = 0; ui < 2; ++ui) {
-                const double h = g0 - u[ui] * gu;
-                f[k][4 * ti + 2 * ui + 0] = h - v[0] * gv;
-                f[k][4 * ti + 2 * ui + 1] = h - v[1] * gv;
-            }
+        const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
+        const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
+        const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
+        for (int ui = 0; ui < 2; ++ui) {
+            const double h = g0 - u[ui] * gu;
+            fk[4 * ti + 2 * ui + 0] = h - v[0] * gv;
+            fk[4 * ti + 2 * ui + 1] = h - v[1] * gv;
         }
+    }
+}
+
+// F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
+inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
+                    double f[3][8]) {
+    for (int k = 0; k < 3; ++k) {
+        corners_axis(pr, k, t, u, v, f[k]);
     }
 }
 
@@ -229,16 +235,14 @@ inline bool examine(const Problem& pr, Region& r) {
     const double t[2] = {r.t0, r.t1};
     const double u[2] = {r.u0, r.u1};
     const double v[2] = {r.v0, r.v1};
+    // First the exclusion test, axis by axis, computing an axis' corners only when the axes
+    // before it did not exclude the region (the values are the same either way).
     double f[3][8];
-    corners(pr, t, u, v, f);
-    bool accepted = true;
-    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
-    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
-    double dt = 0.0;
-    double du = 0.0;
-    double dv = 0.0;
+    double los[3];
+    double his[3];
     for (int k = 0; k < 3; ++k) {
-        const double* fk = f[k];
+        double* fk = f[k];
+        corners_axis(pr, k, t, u, v, fk);
         double lo = fk[0];
         double hi = fk[0];
         for (int c = 1; c < 8; ++c) {
@@ -249,6 +253,19 @@ inline bool examine(const Problem& pr, Region& r) {
         if (hi + pr.error[k] < -pr.reject[k] || lo - pr.error[k] > pr.reject[k]) {
             return false;
         }
+        los[k] = lo;
+        his[k] = hi;
+    }
+    bool accepted = true;
+    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
+    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
+    double dt = 0.0;
+    double du = 0.0;
+    double dv = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double* fk = f[k];
+        const double lo = los[k];
+        const double hi = his[k];
         if (hi <= pr.accept[k] && lo >= -pr.accept[k]) {
             continue;  // this axis is within the tolerance
         }
@@ -388,6 +405,228 @@ ElementaryResult edge_edge(const CcdPoints& points, const ElementaryOptions& opt
 ElementaryResult elementary(CcdKind kind, const CcdPoints& points,
                             const ElementaryOptions& options) {
     return solve(kind, points, options);
+}
+
+// The prefilter (elementary_prefilter_rejects; docs/algorithms.md, "CCD prefilter"). What it
+// must respect: the solver reports an uncapped hit only when some point (t, u, v) of the domain
+// has exact |F_k| <= d + tol + 2^-45 M on every axis k (M the largest |coordinate| of the 8
+// points). For an accepted region that point is its corner (t0, u0, v0), which lies in the domain
+// (u0 + v0 <= 1 is checked for vf), with computed |F_k| <= d + tol + e_k, so exact
+// <= d + tol + 2 e_k = d + tol + M_k 2^-46 (+ 2^-1059, negligible under the guard M >= 2^-300).
+// A region accepted at the width floor passed the exclusion test on every axis (some corner within
+// d + 2 e_k exactly) while F_k = g0 - u gu - v gv varies by at most (12 + 2 + 2) M 2^-50 across
+// it, so |F_k(t0, u0, v0)| <= d + M 2^-45. Each test below proves |F|_inf > d + tol + 2^-44 M
+// (less its own rounding error, far below 2^-45 M) at every point of the domain, so the solver
+// can only report such a pair `capped` (a larger work bound would reject it). Guards: finite
+// coordinates with 2^-300 <= M <= 2^200 (no overflow in products of up to four coordinates, M^3
+// normal), d not NaN, max_boxes >= 1; otherwise no decision. u = 2^-53; rounding to nearest is
+// monotone and every threshold is a double, so fl(a - b) > thr holds only if a - b > thr exactly.
+//
+// 1. Axis filter. F_k(t, u, v) is, for fixed t, a convex combination of x_k - y_k over a vertex x
+//    of the first primitive and y of the second (vf: the vertex minus each triangle corner, weights
+//    1 - u - v, u, v; ee: a_i - b_j, weights products of (1 - u, u) and (1 - v, v)), and each
+//    x_k(t) - y_k(t) is linear in t. If all of them exceed the threshold at t = 0 and t = 1 (or all
+//    lie below its negative), so does F_k everywhere. Each computed difference is within
+//    u |x - y| <= 2 u M of exact; the threshold is (d + tol + 2^-44 M)(1 + 2^-40).
+// 2. Direction filter: the same with F . w for a fixed vector w (any double vector; we try the
+//    normal and in-plane edge normals of the primitives at mid-frame, and for ee the two edge
+//    directions), since |F|_inf >= |F . w| / |w|_1. A computed dot product of a difference with w
+//    errs by at most 8 u M |w|_1 (difference error, three products, two sums); the threshold
+//    (d + tol + 2^-43 M) |w|_1 (1 + 2^-40) covers it with 2^-44 M |w|_1 to spare, and its own
+//    roundings (relative < 5 u) by the factor. A w with 2^-44 M |w|_1 < 2^-1000 is skipped
+//    (underflowed products err absolutely, by up to 2^-1075 each).
+// 3. Plane filter (Tang et al. 2010's coplanarity test made distance-aware). With n(t) the
+//    normal of the triangle's plane (vf) or the common normal of the two edges' lines (ee) and
+//    V(t) the signed volume
+//      vf: V = (p - a) . ((b - a) x (c - a)),  n = (b - a) x (c - a)
+//      ee: V = (b0 - a0) . ((a1 - a0) x (b1 - b0)),  n = (a1 - a0) x (b1 - b0)
+//    F . n = V (vf) or -V (ee) at every (t, u, v), since n is orthogonal to both directions that
+//    u and v move along; so |F|_inf >= |V| / |n|_1 (Hölder). X, Y, Z (the three
+//    differences) are linear in t, so V(t) = X(t) . (Y(t) x Z(t)) is a cubic with Bernstein
+//    coefficients b0 = T000, b1 = (T100 + T010 + T001) / 3, b2 = (T110 + T101 + T011) / 3,
+//    b3 = T111, where Tijk = Xi . (Yj x Zk) (index 0: t = 0, 1: t = 1), and n(t) a quadratic with
+//    Bernstein coefficients Y0 x Z0, (Y0 x Z1 + Y1 x Z0) / 2, Y1 x Z1. On [0, 1] a Bernstein
+//    polynomial lies within the hull of its coefficients, so V(t) >= min b_i and |n(t)|_1 <= N,
+//    the largest L1 norm of the n_i. If min b_i > D N (or max b_i < -D N) with D = d + tol +
+//    2^-44 M, then |F|_inf > D everywhere (V(t) != 0, so n(t) != 0).
+//    Rounding (first order): each difference errs by <= 2uM (|.| <= 2M), a cross-product
+//    component by <= 32 u M^2 (|.| <= 8 M^2), a triple product Tijk by <= 370 u M^3 (|.| <=
+//    48 M^3), a sum of three by <= 1350 u M^3; we subtract E = 2^-40 M^3 = 8192 u M^3 per triple
+//    product. N's components err by <= 80 u M^2 and its sums by a few more: we add 2^-42 M^2 =
+//    2048 u M^2. The threshold D N is a product of a few rounded terms (relative error < 10 u):
+//    we multiply it by 1 + 2^-40.
+namespace {
+
+// Filter 2 for one direction w: all differences (both frames) beyond the threshold on one side.
+template <int N>
+bool separated_along(const Vec3 (&diff)[N], const Vec3& w, double slack, double m) {
+    const double norm1 = std::abs(w.x) + std::abs(w.y) + std::abs(w.z);
+    if (!(0x1p-44 * m * norm1 >= 0x1p-1000)) {
+        return false;  // w too short: underflowed products could err by more than the slack
+    }
+    const double thr = slack * norm1 * (1.0 + 0x1p-40);
+    if (!(thr < std::numeric_limits<double>::infinity())) {
+        return false;
+    }
+    const double first = dot(diff[0], w);
+    if (first > thr) {
+        for (int i = 1; i < N; ++i) {
+            if (!(dot(diff[i], w) > thr)) {
+                return false;
+            }
+        }
+        return true;
+    }
+    if (first < -thr) {
+        for (int i = 1; i < N; ++i) {
+            if (!(dot(diff[i], w) < -thr)) {
+                return false;
+            }
+        }
+        return true;
+    }
+    return false;
+}
+
+// Filter 1 on axis k.
+template <int N>
+bool separated_along_axis(const Vec3 (&diff)[N], int k, double thr) {
+    const double first = diff[0][k];
+    if (first > thr) {
+        for (int i = 1; i < N; ++i) {
+            if (!(diff[i][k] > thr)) {
+                return false;
+            }
+        }
+        return true;
+    }
+    if (first < -thr) {
+        for (int i = 1; i < N; ++i) {
+            if (!(diff[i][k] < -thr)) {
+                return false;
+            }
+        }
+        return true;
+    }
+    return false;
+}
+
+}  // namespace
+
+bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
+                                  const ElementaryOptions& options) {
+    double d = options.min_distance;
+    if (std::isnan(d) || options.max_boxes == 0) {
+        return false;  // the solver reports these unexamined
+    }
+    d = std::max(d, 0.0);
+    const double tol = options.tolerance > 0.0 ? options.tolerance : 0.0;  // as solve()
+    double m = 0.0;
+    for (const auto& p : points) {
+        for (int k = 0; k < 3; ++k) {
+            if (!std::isfinite(p[k])) {
+                return false;
+            }
+            m = std::max(m, std::abs(p[k]));
+        }
+    }
+    if (!(m >= 0x1p-300 && m <= 0x1p200)) {
+        return false;
+    }
+    // Filters 1 and 2: the three axes, then the normal and in-plane edge normals of the
+    // primitives at mid-frame (any vector is valid; these are the likely separating ones).
+    const double slack = d + tol + 0x1p-43 * m;  // d + tol + 2^-44 M + the dot products' error
+    const double axis_thr = (d + tol + 0x1p-44 * m) * (1.0 + 0x1p-40);  // differences: 2uM
+    if (kind == CcdKind::vertex_face) {
+        Vec3 diff[6];
+        for (int end = 0; end < 2; ++end) {
+            const auto* q = points.data() + 4 * end;
+            for (int j = 0; j < 3; ++j) {
+                diff[3 * end + j] = q[0] - q[1 + j];
+            }
+        }
+        for (int k = 0; k < 3; ++k) {
+            if (separated_along_axis(diff, k, axis_thr)) {
+                return true;
+            }
+        }
+        Vec3 mid[4];
+        for (int j = 0; j < 4; ++j) {
+            mid[j] = points[j] + points[j + 4];  // twice the mid-frame point: only a direction
+        }
+        const Vec3 n = cross(mid[2] - mid[1], mid[3] - mid[1]);
+        if (separated_along(diff, n, slack, m)) {
+            return true;
+        }
+        for (int j = 0; j < 3; ++j) {
+            const Vec3 w = cross(n, mid[1 + (j + 1) % 3] - mid[1 + j]);
+            if (separated_along(diff, w, slack, m)) {
+                return true;
+            }
+        }
+    } else {
+        Vec3 diff[8];
+        for (int end = 0; end < 2; ++end) {
+            const auto* q = points.data() + 4 * end;
+            for (int i = 0; i < 2; ++i) {
+                for (int j = 0; j < 2; ++j) {
+                    diff[4 * end + 2 * i + j] = q[i] - q[2 + j];
+                }
+            }
+        }
+        for (int k = 0; k < 3; ++k) {
+            if (separated_along_axis(diff, k, axis_thr)) {
+                return true;
+            }
+        }
+        Vec3 mid[4];
+        for (int j = 0; j < 4; ++j) {
+            mid[j] = points[j] + points[j + 4];
+        }
+        const Vec3 da = mid[1] - mid[0];
+        const Vec3 db = mid[3] - mid[2];
+        const Vec3 n = cross(da, db);
+        if (separated_along(diff, n, slack, m) || separated_along(diff, cross(n, da), slack, m) ||
+            separated_along(diff, cross(n, db), slack, m) || separated_along(diff, da, slack, m) ||
+            separated_along(diff, db, slack, m)) {
+            return true;
+        }
+    }
+    // Filter 3 (plane). X, Y, Z at t = 0 (index 0) and t = 1 (index 4 in points).
+    Vec3 x[2];
+    Vec3 y[2];
+    Vec3 z[2];
+    for (int end = 0; end < 2; ++end) {
+        const auto* q = points.data() + 4 * end;
+        if (kind == CcdKind::vertex_face) {
+            x[end] = q[0] - q[1];
+            y[end] = q[2] - q[1];
+            z[end] = q[3] - q[1];
+        } else {
+            x[end] = q[2] - q[0];
+            y[end] = q[1] - q[0];
+            z[end] = q[3] - q[2];
+        }
+    }
+    const Vec3 c00 = cross(y[0], z[0]);
+    const Vec3 c01 = cross(y[0], z[1]);
+    const Vec3 c10 = cross(y[1], z[0]);
+    const Vec3 c11 = cross(y[1], z[1]);
+    const Vec3 mid = c01 + c10;
+    auto l1 = [](const Vec3& v) { return std::abs(v.x) + std::abs(v.y) + std::abs(v.z); };
+    const double n = std::max({l1(c00), l1(c11), 0.5 * l1(mid)}) + 0x1p-42 * (m * m);
+    const double thr = (d + tol + 0x1p-44 * m) * n * (1.0 + 0x1p-40);
+    const double thr3 = 3.0 * thr;
+    const double e = 0x1p-40 * (m * m * m);
+    const double e3 = 3.0 * e;
+    const double b0 = dot(x[0], c00);
+    const double s1 = dot(x[1], c00) + dot(x[0], c10) + dot(x[0], c01);
+    const double s2 = dot(x[1], c10) + dot(x[1], c01) + dot(x[0], c11);
+    const double b3 = dot(x[1], c11);
+    if (b0 - e > thr && b3 - e > thr && s1 - e3 > thr3 && s2 - e3 > thr3) {
+        return true;
+    }
+    return b0 + e < -thr && b3 + e < -thr && s1 + e3 < -thr3 && s2 + e3 < -thr3;
 }
 
 CcdCornerValues elementary_corner_values(CcdKind kind, const CcdPoints& points,

@@ -44,6 +44,11 @@
 //    v's box meets f's box (owner(v)'s box contains v's); the same for ee with both owners.
 //    Within an object, owner(v) == f means v is a corner of f, and both edges owned by one
 //    triangle share a vertex: exactly the excluded pairs.
+// 4. The prefilter (elementary_prefilter_rejects, argued in elementary.cpp) runs on each pair
+//    that survives the boxes, before the elementary test: it rejects a pair only when the
+//    elementary test would report no hit or a capped one on a pair that provably never comes
+//    within min_distance + tolerance (CcdRequest::prefilter = false turns it off, for checks).
+//    So the result is what testing every primitive pair reports, less such capped pairs.
 
 #include "proxima/ccd/frame_ccd.hpp"
 
@@ -633,9 +638,10 @@ class BatchRunner {
             for (std::size_t j = 0; j < count; ++j) {
                 m_offsets[j + 1] = m_offsets[j] + m_candidates[j].size();
             }
-            stats.elementary_tests += m_offsets[count];
             const auto t1 = Clock::now();
-            test(count);
+            const auto rejected = test(count);
+            stats.elementary_tests += m_offsets[count] - rejected;
+            stats.prefilter_rejects += rejected;
             if (m_stopper.should_stop()) {
                 return false;
             }
@@ -664,14 +670,22 @@ class BatchRunner {
         });
     }
 
-    // The elementary tests of the candidates of the batch's first `count` jobs.
-    void test(std::size_t count) {
+    // The elementary tests of the candidates of the batch's first `count` jobs, each after the
+    // prefilter (point 4 at the top). Returns how many candidates the prefilter rejected.
+    std::uint64_t test(std::size_t count) {
+        std::atomic<std::uint64_t> rejected{0};
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, m_offsets[count], 64), [&](const auto& range) {
                 if (m_stopper.should_stop()) {
                     return;
                 }
                 auto& local = m_hits.local();
+                std::uint64_t filtered = 0;
+                struct Flush {  // adds this range's count on every way out
+                    std::atomic<std::uint64_t>& total;
+                    std::uint64_t& count;
+                    ~Flush() { total.fetch_add(count, std::memory_order_relaxed); }
+                } flush{rejected, filtered};
                 auto job = static_cast<std::size_t>(std::upper_bound(m_offsets.begin(),
                                                                      m_offsets.begin() + count + 1,
                                                                      range.begin()) -
@@ -688,14 +702,20 @@ class BatchRunner {
                         ++job;
                     }
                     const auto& c = m_candidates[job][i - m_offsets[job]];
-                    const auto r =
-                        elementary(c.kind, points_of(m_objects, c), m_request.elementary);
+                    const auto points = points_of(m_objects, c);
+                    if (m_request.prefilter &&
+                        elementary_prefilter_rejects(c.kind, points, m_request.elementary)) {
+                        ++filtered;
+                        continue;
+                    }
+                    const auto r = elementary(c.kind, points, m_request.elementary);
                     if (r.hit) {
                         local.push_back({c.kind, c.object, c.primitive, c.other, c.other_primitive,
                                          r.toi, r.capped});
                     }
                 }
             });
+        return rejected.load();
     }
 
     const std::vector<ObjectData>& m_objects;

@@ -102,6 +102,18 @@ Subset everything(const SceneObject& obj) {
     return s;
 }
 
+constexpr CcdKind VF_KIND = CcdKind::vertex_face;
+constexpr CcdKind EE_KIND = CcdKind::edge_edge;
+
+// A capped hit (the work bound reached, no decision) on a pair that the prefilter proves never
+// comes within min_distance + tolerance: continuous_collisions does not report it (the prefilter
+// runs first), and a larger work bound would reject it (CcdPrefilterVsBrute checks both). An
+// uncapped hit is never dropped: the prefilter never rejects one.
+bool dropped_by_prefilter(CcdKind kind, const CcdPoints& pts, const ElementaryResult& r,
+                          const ElementaryOptions& options) {
+    return r.capped && elementary_prefilter_rejects(kind, pts, options);
+}
+
 // Every vf and ee pair among the subsets, with the same conventions as continuous_collisions
 // (point order, adjacency exclusion within an object, ee with object <= other and primitive <
 // other_primitive within an object), tested with no culling at all. Sorted like the result.
@@ -136,7 +148,7 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
                                     B.vertices[tri[2]], p1[a][v],           p1[b][tri[0]],
                                     p1[b][tri[1]],      p1[b][tri[2]]};
                 const auto r = vertex_face(pts, options);
-                if (r.hit) {
+                if (r.hit && !dropped_by_prefilter(VF_KIND, pts, r, options)) {
                     out.push_back({CcdKind::vertex_face, a, v, b, f, r.toi, r.capped});
                 }
             }
@@ -156,7 +168,7 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
                                     B.vertices[y[1]], p1[a][x[0]],      p1[a][x[1]],
                                     p1[b][y[0]],      p1[b][y[1]]};
                 const auto r = edge_edge(pts, options);
-                if (r.hit) {
+                if (r.hit && !dropped_by_prefilter(EE_KIND, pts, r, options)) {
                     out.push_back({CcdKind::edge_edge, a, e1, b, e2, r.toi, r.capped});
                 }
             }

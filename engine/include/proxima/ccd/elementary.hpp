@@ -49,6 +49,20 @@ ElementaryResult edge_edge(const CcdPoints& points, const ElementaryOptions& opt
 ElementaryResult elementary(CcdKind kind, const CcdPoints& points,
                             const ElementaryOptions& options = {});
 
+// A cheap conservative prefilter for the tests above (docs/algorithms.md, "CCD prefilter"): true
+// only when it proves that at every t in [0, 1] every point of the first primitive is farther than
+// d + tol (d = min_distance, tol = tolerance) from every point of the second in the max norm, with
+// every floating-point rounding bounded: along a coordinate axis or a fixed direction (the vertex
+// beyond one side of the triangle, the edges apart), or from the plane of the triangle / the
+// common normal of the edges as the primitives move (a distance-aware form of Tang et al. 2010's
+// coplanarity filter). Then `elementary` with the same options reports no hit, except possibly a
+// `capped` one (its work bound reached on a pair that a larger bound would reject). False (no
+// decision) for non-finite coordinates, coordinates of magnitude above 2^200 or all below 2^-300,
+// a NaN min_distance or max_boxes = 0. Cost: a few dozen dot and cross products, against the
+// solver's hundreds of nanoseconds or more.
+bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
+                                  const ElementaryOptions& options = {});
+
 // --- Internals exposed for tests (the rounding-error bound is checked against exact arithmetic).
 
 // A region of the (t, u, v) domain: {t0, t1, u0, u1, v0, v1}.

@@ -12,6 +12,9 @@
 // which pairs are tested; the argument that it never drops a pair the elementary test would
 // report, rounding included, is at the top of engine/src/ccd/frame_ccd.cpp. The elementary tests
 // are conservative (never a false negative, never a late time of impact), so the result is too.
+// One exception to "exactly": a pair that the prefilter (elementary_prefilter_rejects) proves never
+// comes within min_distance + tolerance is not tested, so it is absent even where the elementary
+// test, reaching its work bound, would have reported it `capped` (a larger bound rejects it).
 // Vertices used by no triangle are not primitives and are never tested.
 
 #include <array>
@@ -65,8 +68,12 @@ struct CcdStats {
     // Triangle pairs whose swept boxes overlap (from the hierarchies), within and between objects.
     std::uint64_t candidate_pairs = 0;
     // Distinct primitive pairs (vf and ee) tested with the elementary tests after the per-primitive
-    // swept-box filter; brute force would test `brute_force_tests`.
+    // swept-box filter and the prefilter (elementary_prefilter_rejects); brute force would test
+    // `brute_force_tests`.
     std::uint64_t elementary_tests = 0;
+    // Pairs that passed the swept-box filter but were rejected by the prefilter (not tested).
+    // Not sent over the wire (proxima.proto has no field for it).
+    std::uint64_t prefilter_rejects = 0;
     std::uint64_t brute_force_tests = 0;
     // Elementary tests that reached their work bound.
     std::uint64_t capped_tests = 0;
@@ -80,6 +87,11 @@ struct CcdRequest {
     ElementaryOptions elementary;  // min_distance >= 0, tolerance > 0
     bool between_objects = true;   // pairs of primitives of two different objects
     bool self = true;              // pairs within one object (adjacent primitives excluded)
+    // Run the prefilter (elementary_prefilter_rejects) before each elementary test. It drops
+    // only pairs that the elementary test would not report (or would report capped: a pair that
+    // provably never comes within min_distance + tolerance); false tests every candidate, for
+    // checking the filter.
+    bool prefilter = true;
 };
 
 struct CcdResult {
