@@ -540,7 +540,7 @@ bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
     if (kind == CcdKind::vertex_face) {
         Vec3 diff[6];
         for (int end = 0; end < 2; ++end) {
-            const auto* q = points.data() + 4 * end;
+            const auto* q = points.data() + std::ptrdiff_t{4} * end;
             for (int j = 0; j < 3; ++j) {
                 diff[3 * end + j] = q[0] - q[1 + j];
             }
@@ -567,7 +567,7 @@ bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
     } else {
         Vec3 diff[8];
         for (int end = 0; end < 2; ++end) {
-            const auto* q = points.data() + 4 * end;
+            const auto* q = points.data() + std::ptrdiff_t{4} * end;
             for (int i = 0; i < 2; ++i) {
                 for (int j = 0; j < 2; ++j) {
                     diff[4 * end + 2 * i + j] = q[i] - q[2 + j];
@@ -597,7 +597,7 @@ bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
     Vec3 y[2];
     Vec3 z[2];
     for (int end = 0; end < 2; ++end) {
-        const auto* q = points.data() + 4 * end;
+        const auto* q = points.data() + std::ptrdiff_t{4} * end;
         if (kind == CcdKind::vertex_face) {
             x[end] = q[0] - q[1];
             y[end] = q[2] - q[1];
