@@ -113,14 +113,10 @@ int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd:
         }
         doc["object_pairs"] = nlohmann::json::array();
         for (const auto& op : r.object_pairs) {
-            auto e = pair_json(r.pairs[op.pair]);
-            // The object pair in (object <= other) order; the contact keeps its own roles.
-            e["contact_object"] = e["object"];
-            e["contact_other"] = e["other"];
-            e["object"] = op.object;
-            e["other"] = op.other;
-            e["toi"] = op.toi;
-            doc["object_pairs"].push_back(std::move(e));
+            // The proto's ObjectPairToi: the object pair (object <= other), its earliest toi and
+            // the index in `pairs` of that contact, whose own `object` owns its `primitive`.
+            doc["object_pairs"].push_back(
+                {{"object", op.object}, {"other", op.other}, {"toi", op.toi}, {"pair", op.pair}});
         }
         doc["earliest"] = r.earliest ? pair_json(r.pairs[*r.earliest]) : nlohmann::json(nullptr);
         doc["stats"] = {{"candidate_pairs", st.candidate_pairs},

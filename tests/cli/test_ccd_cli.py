@@ -60,7 +60,7 @@ class CcdCli(unittest.TestCase):
     def check_shape(self, doc):
         for key in ("objects", "pairs", "object_pairs", "earliest", "stats"):
             self.assertIn(key, doc)
-        for p in doc["pairs"] + doc["object_pairs"]:
+        for p in doc["pairs"]:
             for key in ("kind", "object", "primitive", "other", "other_primitive", "toi"):
                 self.assertIn(key, p)
             self.assertIn(p["kind"], ("vf", "ee"))
@@ -71,7 +71,12 @@ class CcdCli(unittest.TestCase):
         if doc["pairs"]:
             self.assertEqual(doc["earliest"]["toi"], min(p["toi"] for p in doc["pairs"]))
             for op in doc["object_pairs"]:
+                self.assertEqual(set(op), {"object", "other", "toi", "pair"})
                 self.assertLessEqual(op["object"], op["other"])
+                contact = doc["pairs"][op["pair"]]
+                self.assertEqual(sorted((contact["object"], contact["other"])),
+                                 [op["object"], op["other"]])
+                self.assertEqual(contact["toi"], op["toi"])
                 self.assertEqual(op["toi"], min(
                     p["toi"] for p in doc["pairs"]
                     if sorted((p["object"], p["other"])) == [op["object"], op["other"]]))
