@@ -23,6 +23,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
+#include "common/json_output.hpp"
 #include "common/progress.hpp"
 #include "proxima/io/mesh_io.hpp"
 #include "proxima/massive/generator.hpp"
@@ -109,15 +110,11 @@ bool same_mesh(const TriangleMesh& a, const TriangleMesh& b) {
 
 nlohmann::json summary_json(const std::string& model, const massive::GeneratedSummary& s,
                             const std::string& scene, double seconds) {
-    const bool empty = s.box.empty();
-    auto point = [&](const Vec3& p) {
-        return empty ? nlohmann::json(nullptr) : nlohmann::json{p.x, p.y, p.z};
-    };
     return {{"model", model},
             {"object_count", s.objects},
             {"triangle_count", s.triangles},
             {"vertex_count", s.vertices},
-            {"box", {{"lo", point(s.box.lo)}, {"hi", point(s.box.hi)}}},
+            {"box", client::box_json(s.box)},
             {"scene", scene},
             {"seconds", seconds}};
 }

@@ -71,10 +71,6 @@ std::string review_summary(const nlohmann::json& doc) {
            (latency.contains("p99") ? ", p99 " + latency["p99"].dump() + " ms" : std::string());
 }
 
-nlohmann::json vec_json(const Vec3& v) {
-    return client::point_json(v);
-}
-
 nlohmann::json cache_json(const massive::CacheStats& c) {
     return {{"budget_bytes", c.budget_bytes},
             {"resident_bytes", c.resident_bytes},
@@ -182,11 +178,11 @@ nlohmann::json pair_json(const massive::ObjectPairResult& p, const std::string& 
     return {{"object", p.object_a},
             {"name", name_a},
             {"triangle", p.triangle_a},
-            {"point", vec_json(p.point_a)},
+            {"point", client::point_json(p.point_a)},
             {"other", p.object_b},
             {"other_name", name_b},
             {"other_triangle", p.triangle_b},
-            {"other_point", vec_json(p.point_b)},
+            {"other_point", client::point_json(p.point_b)},
             {"distance", p.distance}};
 }
 
@@ -411,9 +407,9 @@ nlohmann::json hit_json(const massive::AvatarHit& h, const std::string& name) {
     return {{"object", h.object},
             {"name", name},
             {"triangle", h.object_triangle},
-            {"point", vec_json(h.object_point)},
+            {"point", client::point_json(h.object_point)},
             {"other_triangle", h.avatar_triangle},
-            {"other_point", vec_json(h.avatar_point)},
+            {"other_point", client::point_json(h.avatar_point)},
             {"distance", h.distance}};
 }
 
