@@ -31,6 +31,12 @@ void add_generate_command(CLI::App& app, int& exit_code);
 // (clients/cli/massive_command.cpp).
 void add_massive_commands(CLI::App& app, int& exit_code);
 
+// --weld (merge identical positions in every file) as a WeldMode; without it only triangle soups
+// are welded (commands that read mesh files: distance, ccd).
+inline WeldMode weld_mode(bool weld) {
+    return weld ? WeldMode::always : WeldMode::triangle_soups;
+}
+
 // Prints "proxima: error: CODE: message" on standard error and returns exit status 1
 // (clients/cli/cli_util.cpp). CODE is the gRPC name, also for codes the engine has no name for
 // ("UNAUTHENTICATED: ...", not "INTERNAL: gRPC UNAUTHENTICATED: ...").
