@@ -31,6 +31,7 @@ struct CcdArgs {
     bool split_components = false;
     bool weld = false;
     double min_distance = 0.0;
+    double toi_tolerance = ccd::ElementaryOptions{}.toi_tolerance;
     JsonOutput output;
     std::vector<std::string> files;
 };
@@ -231,6 +232,7 @@ int run_ccd(const CcdArgs& args) {
     }
     ccd::CcdRequest request;
     request.elementary.min_distance = args.min_distance;
+    request.elementary.toi_tolerance = args.toi_tolerance;
     auto result = args.server.empty() ? ccd_local(frames.value(), request)
                                       : ccd_remote(args, frames.value(), request);
     if (!result.ok()) {
@@ -261,6 +263,10 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
     cmd->add_option("--min-distance", args->min_distance,
                     "Report contact when primitives come within this distance")
         ->check(non_negative_number())
+        ->capture_default_str();
+    cmd->add_option("--toi-tolerance", args->toi_tolerance,
+                    "Precision of each time of impact, a fraction of the step in [0, 1]")
+        ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
     add_json_output(*cmd, args->output);
     cmd->add_option("files", args->files, "T0_FILE T1_FILE: the two frames (any mesh format)")

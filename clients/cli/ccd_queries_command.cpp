@@ -35,6 +35,7 @@ struct CcdQueriesArgs {
     JsonOutput output;
     double min_distance = 0.0;
     double tolerance = ccd::ElementaryOptions{}.tolerance;
+    double toi_tolerance = ccd::ElementaryOptions{}.toi_tolerance;
     std::uint32_t max_boxes = ccd::ElementaryOptions{}.max_boxes;
     std::vector<std::string> files;
 };
@@ -56,6 +57,7 @@ int run_ccd_queries(const CcdQueriesArgs& args) {
     ccd::ElementaryOptions options;
     options.min_distance = args.min_distance;
     options.tolerance = args.tolerance;
+    options.toi_tolerance = args.toi_tolerance;
     options.max_boxes = args.max_boxes;
 
     std::optional<ccd::CcdKind> forced;
@@ -185,8 +187,12 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code) {
         ->check(non_negative_number())
         ->capture_default_str();
     cmd->add_option("--tolerance", args->tolerance,
-                    "Precision of the time of impact and size of the regions reported as contact")
+                    "Distance band: regions within min distance + this are reported as contact")
         ->check(positive_number())
+        ->capture_default_str();
+    cmd->add_option("--toi-tolerance", args->toi_tolerance,
+                    "Precision of each time of impact, a fraction of the step in [0, 1]")
+        ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
     cmd->add_option("--max-boxes", args->max_boxes, "Work bound per query (regions examined)")
         ->check(whole_number(1, 4'000'000'000))

@@ -327,6 +327,12 @@ TEST(Wire, MalformedBuffersAreRejectedWithTheCulprit) {
     frame.mutable_queries()->set_ccd_min_distance(std::nan(""));
     expect_error(wire::decode_frame(frame).status(), StatusCode::invalid_argument,
                  {"queries.ccd_min_distance"});
+    for (const double bad : {-1e-9, 1.5, std::nan("")}) {
+        frame.Clear();
+        frame.mutable_queries()->set_ccd_toi_tolerance(bad);
+        expect_error(wire::decode_frame(frame).status(), StatusCode::invalid_argument,
+                     {"queries.ccd_toi_tolerance", "[0, 1]"});
+    }
 }
 
 // --- Frames: client encode -> daemon decode ----------------------------------------------------
@@ -352,6 +358,7 @@ TEST(Wire, ClientFrameDecodesOnTheDaemonWithEveryChangeAndQuery) {
     f.penetration = true;
     f.ccd = true;
     f.ccd_request.elementary.min_distance = 1.0 / 3.0;
+    f.ccd_request.elementary.toi_tolerance = 1.0 / 1024.0;
 
     for (const bool float32 : {false, true}) {
         v1::Frame message;
@@ -399,6 +406,7 @@ TEST(Wire, ClientFrameDecodesOnTheDaemonWithEveryChangeAndQuery) {
         EXPECT_TRUE(g.penetration);
         EXPECT_TRUE(g.ccd);
         EXPECT_EQ(bits(g.ccd_request.elementary.min_distance), bits(1.0 / 3.0));
+        EXPECT_EQ(bits(g.ccd_request.elementary.toi_tolerance), bits(1.0 / 1024.0));
     }
 
     // No tolerance stays no tolerance (proto3 `optional`), and every culler survives.

@@ -33,7 +33,8 @@ def make_frame(scene_id: str = "", frame: int = 0,
                separation: bool = True, self_query: bool = False, collisions: bool = False,
                tolerance: Optional[float] = None, pns: bool = False,
                culler: Union[str, int] = "auto", self_points: bool = False, ccd: bool = False,
-               ccd_min_distance: Optional[float] = None, penetration: bool = False,
+               ccd_min_distance: Optional[float] = None,
+               ccd_toi_tolerance: Optional[float] = None, penetration: bool = False,
                voronoi_cell: Optional[float] = None, float32: Optional[bool] = None) -> Any:
     """One Frame (proto): changes by daemon object id, then the queries to run.
 
@@ -45,7 +46,8 @@ def make_frame(scene_id: str = "", frame: int = 0,
       `collisions` (intersecting triangle pairs), `tolerance` (pairs within this distance),
       `pns` (pairs whose separation is within the tolerance of the closest), `ccd` (continuous
       collisions from the previous positions to these; `ccd_min_distance` reports contact
-      closer than that), `penetration` (penetration vectors of intersecting pairs; implies
+      closer than that; `ccd_toi_tolerance` the precision of each toi, a fraction of the step,
+      default 1e-6), `penetration` (penetration vectors of intersecting pairs; implies
       collisions), `culler` (a name from CULLERS), `voronoi_cell` (the Voronoi cullers' cell)
     - `float32`: send vertices as float32 (None: each array's own dtype)
     """
@@ -66,6 +68,8 @@ def make_frame(scene_id: str = "", frame: int = 0,
         q.tolerance = tolerance
     if ccd_min_distance is not None:
         q.ccd_min_distance = ccd_min_distance
+    if ccd_toi_tolerance is not None:
+        q.ccd_toi_tolerance = ccd_toi_tolerance
     if voronoi_cell is not None:
         q.voronoi_cell = voronoi_cell
     return f

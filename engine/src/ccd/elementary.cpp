@@ -19,7 +19,8 @@
 // outside the triangle and is dropped (u0, v0 are dyadic bisection points, so the sum is exact).
 // A surviving region is accepted as a contact when on every axis [min_k, max_k] lies within
 // [-(d + tol + e_k), d + tol + e_k] (every point of it is within d + tol + 2 e_k of touching on
-// every axis), or when no side of it may be split any more (all widths at the 2^-50 floor).
+// every axis) and its time interval is at most toi_tolerance wide (such a region that is wider is
+// bisected in t), or when no side of it may be split any more (all widths at the 2^-50 floor).
 // Otherwise it is bisected along the parameter most likely to let a half be excluded: for each
 // axis not yet within the tolerance, the slack is how far its range reaches past the far end of
 // [-d - e, d + e] (a half is excluded once a split removes more than that from one side), and
@@ -92,9 +93,10 @@ struct Problem {
     bool vertex_face = true;
     // g[k][q][end]: q = 0: g0, 1: gu, 2: gv; end 0: at t = 0, 1: at t = 1.
     double g[3][3][2] = {};
-    double error[3] = {};   // e_k
-    double reject[3] = {};  // d_k: exclusion threshold
-    double accept[3] = {};  // d_k + tol_k + e_k: acceptance threshold
+    double error[3] = {};    // e_k
+    double reject[3] = {};   // d_k: exclusion threshold
+    double accept[3] = {};   // d_k + tol_k + e_k: acceptance threshold
+    double toi_width = 0.0;  // a region is accepted only once t1 - t0 <= this (toi_tolerance)
     bool valid = false;
 };
 
@@ -289,7 +291,10 @@ inline bool examine(const Problem& pr, Region& r) {
         dv = std::max(dv, cv * inv_slack);
     }
     if (accepted) {
-        r.split = 3;
+        // Within the tolerance on every axis: a contact once its time interval is narrow enough
+        // (toi_tolerance), else split in t until it is (or it reaches the width floor), so that
+        // the toi is within toi_tolerance of the earliest time the band is reached.
+        r.split = r.t1 - r.t0 > pr.toi_width && r.t1 - r.t0 > MIN_WIDTH ? 0 : 3;
         return true;
     }
     // Bisect the parameter most likely to exclude a half (the largest score), among those still
@@ -328,7 +333,8 @@ ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOp
     if (!(tol > 0.0)) {
         tol = 0.0;  // NaN or <= 0: refine to the width floor
     }
-    const Problem pr = make_problem(kind, points, d, tol);
+    Problem pr = make_problem(kind, points, d, tol);
+    pr.toi_width = options.toi_tolerance > 0.0 ? options.toi_tolerance : 0.0;  // NaN: the floor
     if (!pr.valid) {
         // Non-finite coordinates: nothing can be excluded.
         result.hit = result.capped = true;

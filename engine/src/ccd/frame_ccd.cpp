@@ -455,6 +455,11 @@ Status validate(const Scene& scene, std::span<const std::vector<Vec3>> positions
         return invalid_argument("ccd: tolerance must be finite and > 0 (got " +
                                 std::to_string(opt.tolerance) + ")");
     }
+    if (!std::isfinite(opt.toi_tolerance) || opt.toi_tolerance < 0.0 || opt.toi_tolerance > 1.0) {
+        return invalid_argument(
+            "ccd: toi_tolerance must be in [0, 1] (a fraction of the step; got " +
+            std::to_string(opt.toi_tolerance) + ")");
+    }
     if (opt.max_boxes == 0) {
         // The elementary tests would report every pair (capped at t = 0) without examining it.
         return invalid_argument("ccd: max_boxes must be at least 1");

@@ -175,6 +175,15 @@ Status decode_queries(const v1::QuerySpec& q, FrameRequest* out) {
         }
         out->ccd_request.elementary.min_distance = q.ccd_min_distance();
     }
+    if (q.has_ccd_toi_tolerance()) {
+        const double t = q.ccd_toi_tolerance();
+        if (!(t >= 0.0 && t <= 1.0)) {  // NaN too
+            return invalid_argument(
+                "queries.ccd_toi_tolerance must be in [0, 1] (a fraction of the step; got " +
+                std::to_string(t) + ")");
+        }
+        out->ccd_request.elementary.toi_tolerance = t;
+    }
     return {};
 }
 
@@ -206,6 +215,7 @@ void encode_frame(const FrameRequest& frame, const std::string& scene_id, bool f
     if (frame.ccd) {
         out->mutable_queries()->set_ccd(true);
         out->mutable_queries()->set_ccd_min_distance(frame.ccd_request.elementary.min_distance);
+        out->mutable_queries()->set_ccd_toi_tolerance(frame.ccd_request.elementary.toi_tolerance);
     }
 }
 

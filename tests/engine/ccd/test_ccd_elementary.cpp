@@ -52,6 +52,38 @@ TEST(CcdElementary, VertexThroughTriangleAtHalf) {
     EXPECT_EQ(elementary(VF, pts).toi, r.toi);
 }
 
+// A slow approach: the vertex sinks from 1.3e-6 above the triangle to 0.7e-6 below it,
+// h(t) = 1.3e-6 - 2e-6 t: it enters the band d + tol (tol = 1e-6) at t = 0.15 and touches at
+// t = 0.65. The toi may be up to toi_tolerance earlier than the band's entry, never later than the
+// touch.
+TEST(CcdElementary, TimeOfImpactIsWithinItsToleranceOfTheBand) {
+    const auto pts = vertex_and_static_triangle({0.25, 0.25, 1.3e-6}, {0.25, 0.25, -0.7e-6});
+    const auto fine = vertex_face(pts);  // toi_tolerance 1e-6
+    EXPECT_TRUE(fine.hit);
+    EXPECT_FALSE(fine.capped);
+    EXPECT_LE(fine.toi, 0.65);
+    EXPECT_GE(fine.toi, 0.15 - 1e-6);
+    // The whole step allowed (the solver before toi_tolerance): the first time interval within
+    // the band is reported at its start, a dyadic grid point well before the touch.
+    ElementaryOptions step;
+    step.toi_tolerance = 1.0;
+    const auto s = vertex_face(pts, step);
+    EXPECT_TRUE(s.hit);
+    EXPECT_LE(s.toi, 0.5);
+    // Refining time excludes the sub-intervals where the vertex is still above the triangle, so
+    // the default toi is much closer to the touch (within its tolerance of the earliest region
+    // the exclusion test cannot reject).
+    EXPECT_GT(fine.toi, 0.6) << fine.toi;
+    EXPECT_GT(fine.toi, s.toi + 0.1);
+    // Zero: refined to the width floor, still never late.
+    ElementaryOptions exact;
+    exact.toi_tolerance = 0.0;
+    const auto e = vertex_face(pts, exact);
+    EXPECT_TRUE(e.hit);
+    EXPECT_GE(e.toi, fine.toi);
+    EXPECT_LE(e.toi, 0.65);
+}
+
 TEST(CcdElementary, VertexMissesTriangle) {
     // Through the plane outside the triangle (beyond the hypotenuse), and parallel above it.
     EXPECT_FALSE(vertex_face(vertex_and_static_triangle({0.6, 0.6, 1.0}, {0.6, 0.6, -1.0})).hit);

@@ -24,6 +24,14 @@ struct ElementaryOptions {
     // Precision of the time of impact, and the size below which a region of (t, u, v) that still
     // may hold a root is reported as contact rather than refined further.
     double tolerance = 1e-6;
+    // Precision of the time of impact, as a fraction of the step (>= 0): a region is accepted as
+    // a contact only once its time interval is at most this wide (or at the width floor), so the
+    // toi is at most this much earlier than the earliest time at which the primitives come within
+    // min_distance + tolerance, and never later than the earliest contact. Without it a pair
+    // that stays inside that band (a resting contact) was reported at the start of whatever time
+    // interval first fit the band: a coarse grid (multiples of 1/64-1/128 of the step on real
+    // cloth frames).
+    double toi_tolerance = 1e-6;
     // Work bound: at most this many regions are examined per test. When it is reached the test
     // reports contact at the earliest time it could not exclude (conservative, flagged `capped`).
     // Each region costs the same bounded work (about 50 ns on a 2-core EPYC dev box), so the
