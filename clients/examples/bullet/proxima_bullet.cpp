@@ -309,6 +309,34 @@ void build_ball_bowl(World& w, const Args& args) {
     w.add_soft("ball", ball);
 }
 
+// ropes: two ropes (ribbons 2 nodes wide and --resolution nodes long, Bullet's patches; a
+// rope proper, CreateRope, has no faces to send) hanging from anchors 1.4 m apart, released
+// horizontal and pointing away from each other, so that they swing down into each other. Bullet's
+// soft-soft collision (VF_SS) is on.
+void build_ropes(World& w, const Args& args) {
+    const double length = 1.2;
+    const double width = 0.08;
+    const double top = 2.0;
+    for (int k = 0; k < 2; ++k) {
+        const double anchor = k == 0 ? -0.7 : 0.7;
+        const double tip = k == 0 ? anchor - length : anchor + length;
+        // corner00/10: the anchored end (fixed), corner01/11: the tip; a small tilt along z
+        // keeps the two from being exactly coplanar.
+        const double dz = k == 0 ? 0.0 : 0.03;
+        btSoftBody* rope = btSoftBodyHelpers::CreatePatch(
+            w.info(), btVector3(anchor, top, -width / 2 + dz),
+            btVector3(anchor, top, width / 2 + dz), btVector3(tip, top, -width / 2),
+            btVector3(tip, top, width / 2), 2, args.resolution, 1 + 2, true);
+        rope->getCollisionShape()->setMargin(args.margin);
+        rope->m_cfg.collisions = btSoftBody::fCollision::SDF_RS | btSoftBody::fCollision::VF_SS;
+        rope->m_cfg.kDF = 0.2;
+        rope->m_cfg.piterations = 8;
+        rope->m_materials[0]->m_kLST = 0.9;
+        rope->setTotalMass(0.3);
+        w.add_soft(k == 0 ? "rope-a" : "rope-b", rope);
+    }
+}
+
 // --- Comparing the daemon's answers with the in-process engine (--check) ---------------------
 
 std::uint64_t bits(double d) {
@@ -630,8 +658,10 @@ int run(const Args& args) {
     World world;
     if (args.scene == "cloth-sphere") {
         build_cloth_sphere(world, args);
-    } else {
+    } else if (args.scene == "ball-bowl") {
         build_ball_bowl(world, args);
+    } else {
+        build_ropes(world, args);
     }
     const std::size_t soft_count = world.soft.size();
     // Per soft body: its topology (vertex -> triangles) and its CCD edges (ids of ee contacts).
@@ -712,12 +742,14 @@ int run(const Args& args) {
         for (const auto& s : world.soft) {
             cur.push_back(Session::positions(s));
         }
-        // Bullet's soft-rigid contacts of this step: (soft body, node).
+        // Bullet's contacts of this step: soft-rigid (m_rcontacts, by (soft body, node), compared
+        // with the near-contacts below) and soft-soft (m_scontacts, counted).
         std::set<std::pair<std::size_t, std::uint32_t>> bullet_nodes;
         std::size_t bullet_contacts = 0;
         for (std::size_t i = 0; i < soft_count; ++i) {
             const auto* body = world.soft[i].body;
-            bullet_contacts += static_cast<std::size_t>(body->m_rcontacts.size());
+            bullet_contacts += static_cast<std::size_t>(body->m_rcontacts.size()) +
+                               static_cast<std::size_t>(body->m_scontacts.size());
             for (int c = 0; c < body->m_rcontacts.size(); ++c) {
                 bullet_nodes.insert({i, static_cast<std::uint32_t>(body->m_rcontacts[c].m_node -
                                                                    &body->m_nodes[0])});
@@ -744,9 +776,9 @@ int run(const Args& args) {
         std::uint64_t self_contacts = 0;
         json pairs = json::array();
         for (const auto& p : ccd_result.pairs) {
-            if (p.object != p.other && (p.object >= soft_count || p.other >= soft_count)) {
-                ++missed;  // a soft body against an obstacle: Bullet let it through
-            } else if (p.object == p.other) {
+            if (p.object != p.other) {
+                ++missed;  // soft-rigid (SDF_RS) or soft-soft (VF_SS): Bullet let it through
+            } else {
                 ++self_contacts;  // Bullet's soft bodies here have no self-collision
             }
             if (pairs.size() < 16) {
@@ -1081,12 +1113,13 @@ int run_main(int argc, char** argv) {
     CLI::App app{
         "proxima-bullet: a Bullet soft-body simulation (float64) that streams its nodes to "
         "proximad every step and uses CCD, distances and penetration vectors"};
-    app.add_option("--scene", args.scene, "cloth-sphere or ball-bowl")
-        ->check(CLI::IsMember({"cloth-sphere", "ball-bowl"}));
+    app.add_option("--scene", args.scene, "cloth-sphere, ball-bowl or ropes")
+        ->check(CLI::IsMember({"cloth-sphere", "ball-bowl", "ropes"}));
     app.add_option("--server", args.server, "the daemon's HOST:PORT")->required();
     app.add_option("--steps", args.steps, "simulation steps")->check(CLI::Range(1, 1000000));
     app.add_option("--resolution", args.resolution,
-                   "cloth nodes per side (ball: 10x this many hull points)")
+                   "cloth nodes per side; ropes: nodes along each rope; ball: 10x this many hull "
+                   "points")
         ->check(CLI::Range(3, 200));
     app.add_option("--dt", args.dt, "Bullet's time step, seconds")->check(CLI::Range(1e-5, 0.1));
     app.add_option("--margin", args.margin, "the soft bodies' collision margin")
