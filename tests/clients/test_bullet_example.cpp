@@ -9,6 +9,7 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -365,11 +367,32 @@ TEST(BulletExample, WithoutLimitingTheBruteForceFindsWhatBulletMissed) {
     EXPECT_EQ(counts.hits, ccd_contacts);
 }
 
-TEST(BulletExample, UsageErrorsExitTwoWithOneLine) {
+// Standard error and exit status of a command line (standard output dropped).
+std::pair<int, std::string> run_capturing_stderr(const std::string& command) {
+    std::string err;
+    FILE* p = popen((command + " 2>&1 >/dev/null").c_str(), "r");
+    if (p == nullptr) {
+        return {-1, err};
+    }
+    std::array<char, 512> buf{};
+    while (std::fgets(buf.data(), static_cast<int>(buf.size()), p) != nullptr) {
+        err += buf.data();
+    }
+    const int status = pclose(p);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, err};
+}
+
+TEST(BulletExample, UsageErrorsExitTwoWithOneLineAndTheHelpHint) {
     const std::string bin = PROXIMA_BULLET_PATH;
-    EXPECT_EQ(run(bin + " --server 127.0.0.1:1 --scene teapot 2>/dev/null"), 2);
-    EXPECT_EQ(run(bin + " --scene cloth-sphere 2>/dev/null"), 2);  // --server is required
-    EXPECT_EQ(run(bin + " --server 127.0.0.1:1 --steps 0 2>/dev/null"), 2);
+    for (const std::string args : {" --server 127.0.0.1:1 --scene teapot",
+                                   " --scene cloth-sphere",  // --server is required
+                                   " --server 127.0.0.1:1 --steps 0"}) {
+        const auto [code, err] = run_capturing_stderr(bin + args);
+        EXPECT_EQ(code, 2) << args;
+        EXPECT_EQ(err.rfind("proxima-bullet: error: ", 0), 0u) << err;
+        EXPECT_NE(err.find("\nRun 'proxima-bullet --help'\n"), std::string::npos) << err;
+        EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 2) << err;
+    }
 }
 
 }  // namespace
