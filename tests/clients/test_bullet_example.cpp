@@ -26,6 +26,7 @@
 #include "proxima/ccd/elementary.hpp"
 #include "proxima/ccd/frame_ccd.hpp"
 #include "proxima/mesh/mesh.hpp"
+#include "support/sanitized.hpp"
 
 namespace proxima {
 namespace {
@@ -320,7 +321,8 @@ json run_and_check(const std::string& scene, std::size_t steps, const std::strin
 }
 
 TEST(BulletExample, ClothSphereAnswersLikeTheEngineAndNothingPassesThrough) {
-    const auto r = run_and_check("cloth-sphere", 200, "--resolution 12");
+    // Under a sanitizer (TSan: 5-15x, on one CPU) a shorter run keeps the test within its timeout.
+    const auto r = run_and_check("cloth-sphere", test::SANITIZED ? 80 : 200, "--resolution 12");
     // The scene exercises what the client is for: Bullet lets cloth nodes sink into the sphere
     // and the service's CCD limits those steps.
     EXPECT_GT(r["limited_step_count"].get<std::uint64_t>(), 0u);

@@ -461,6 +461,19 @@ struct Spread {
 class Session {
   public:
     Session(World& world, const Args& args) : m_world(world), m_args(args) {}
+    // On an error path (close() not reached): cancel the stream and delete the scene, one
+    // attempt, so that the daemon does not keep it until it expires.
+    ~Session() {
+        if (m_stream) {
+            m_stream->cancel();
+            m_stream.reset();
+        }
+        if (m_client && !m_scene_id.empty()) {
+            (void)m_client->delete_scene(m_scene_id);
+        }
+    }
+    Session(const Session&) = delete;
+    Session& operator=(const Session&) = delete;
 
     Status open() {
         client::ConnectOptions options;  // float64 vertices: bit-identical answers
@@ -510,6 +523,7 @@ class Session {
         }
         if (m_client && !m_scene_id.empty()) {
             auto deleted = m_client->delete_scene(m_scene_id);
+            m_scene_id.clear();
             if (st.ok()) {
                 st = deleted;
             }
