@@ -369,6 +369,36 @@ TEST(BulletExample, WithoutLimitingTheBruteForceFindsWhatBulletMissed) {
     EXPECT_EQ(counts.hits, ccd_contacts);
 }
 
+// --pushout-only: no step limiting, so Bullet's cloth sinks into the sphere's mesh, and the
+// penetration vectors push nodes back out after the step (one more frame on those steps).
+TEST(BulletExample, PushOutOnlyFollowsPenetrationsWithACorrectionFrame) {
+    test::DaemonProcess daemon({"--log-level", "warn"});
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    TempDir dir;
+    ASSERT_FALSE(dir.path.empty());
+    const auto log_file = dir.path / "log.json";
+    const std::size_t steps = 80;
+    const std::string command = std::string(PROXIMA_BULLET_PATH) + " --server " + daemon.address() +
+                                " --scene cloth-sphere --steps " + std::to_string(steps) +
+                                " --resolution 12 --pushout-only --check --quiet --json " +
+                                log_file.string();
+    ASSERT_EQ(run(command), 0) << command;
+    const json log = load(log_file);
+    const auto& summary = log["summary"];
+    EXPECT_EQ(log["response"], "pushout");
+    EXPECT_EQ(summary["check"]["mismatch_count"], 0) << summary["check"].dump();
+    EXPECT_EQ(summary["limited_step_count"], 0);
+    std::uint64_t pushed_steps = 0;
+    for (const auto& s : log["steps"]) {
+        const bool pushed = s["pushed_node_count"].get<std::uint64_t>() > 0;
+        pushed_steps += pushed ? 1 : 0;
+        EXPECT_EQ(s["frame_count"], pushed ? 2 : 1) << s.dump();
+        EXPECT_EQ(s["freeze_rounds"], 0);
+    }
+    EXPECT_GT(pushed_steps, 0u);
+    EXPECT_EQ(summary["pushout_count"], pushed_steps);
+}
+
 // Standard error and exit status of a command line (standard output dropped).
 std::pair<int, std::string> run_capturing_stderr(const std::string& command) {
     std::string err;

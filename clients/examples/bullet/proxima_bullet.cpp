@@ -38,6 +38,7 @@
 #include "client/proxima_client.hpp"
 #include "proxima/ccd/frame_ccd.hpp"
 #include "proxima/frame_pipeline.hpp"
+#include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
 
 #ifndef BT_USE_DOUBLE_PRECISION
@@ -86,6 +87,7 @@ struct Args {
     std::string record_file;
     bool check = false;
     bool no_limit = false;
+    bool pushout_only = false;
     bool quiet = false;
 };
 
@@ -687,6 +689,15 @@ int run(const Args& args) {
         edges.push_back(ccd::mesh_edges(*topologies.back()));
     }
 
+    // The obstacles on their own, for the push-out's inside test.
+    Scene obstacle_scene;
+    for (const auto& o : world.obstacles) {
+        if (auto added = obstacle_scene.add_object({o.name, o.mesh}); !added.ok()) {
+            std::fprintf(stderr, "proxima-bullet: error: %s\n", added.status().to_string().c_str());
+            return 1;
+        }
+    }
+
     Session session(world, args);
     if (auto st = session.open(); !st.ok()) {
         std::fprintf(stderr, "proxima-bullet: error: %s (daemon at %s)\n",
@@ -849,7 +860,8 @@ int run(const Args& args) {
         std::set<std::pair<std::size_t, std::uint32_t>> frozen;
         int freeze_rounds = 0;
         std::optional<double> rewound_to;
-        while (!args.no_limit && !ccd_result.pairs.empty() && freeze_rounds < args.max_freeze) {
+        const bool limit = !args.no_limit && !args.pushout_only;
+        while (limit && !ccd_result.pairs.empty() && freeze_rounds < args.max_freeze) {
             ++freeze_rounds;
             involved(ccd_result, frozen);
             for (const auto& [i, n] : frozen) {
@@ -866,7 +878,7 @@ int run(const Args& args) {
             }
             ccd_result = soft_contacts(*response->ccd, soft_count);
         }
-        if (!args.no_limit && !ccd_result.pairs.empty()) {
+        if (limit && !ccd_result.pairs.empty()) {
             const double s = args.rewind * ccd_result.pairs[*ccd_result.earliest].toi;
             rewound_to = s;
             ++totals.rewinds;
@@ -897,33 +909,46 @@ int run(const Args& args) {
 
         std::size_t pushed_nodes = 0;
         if (!args.no_limit && freeze_rounds == 0) {
-            // No contact along the step. Soft triangles inside an obstacle (a state that was
-            // already intersecting: Bullet's response failed) are pushed out along the vector.
+            // No contact along the step. Soft nodes inside a (closed) obstacle next to the
+            // overlapping features of a penetration (a state that was already intersecting:
+            // Bullet's response failed) are moved by the penetration vector, in the direction
+            // that takes them out (an exact winding-number test decides inside; a soft body's
+            // faces have no outward side for the vector's sign to rely on), and stop.
             std::set<std::pair<std::size_t, std::uint32_t>> moved;
             std::vector<std::vector<Vec3>> next = cur;
             for (const auto& pen : response->penetrations) {
                 if (pen.object == pen.other || pen.vector == Vec3{}) {
                     continue;
                 }
-                auto push = [&](std::uint32_t object, const std::vector<std::uint32_t>& tris,
-                                const Vec3& by) {
-                    if (object >= soft_count) {
-                        return;
-                    }
-                    for (auto t : tris) {
-                        for (auto n : world.soft[object].triangles[t]) {
-                            if (moved.insert({object, n}).second) {
-                                next[object][n] += by;
+                const bool soft_first = pen.object < soft_count;
+                const std::uint32_t soft = soft_first ? pen.object : pen.other;
+                const std::uint32_t obstacle = soft_first ? pen.other : pen.object;
+                if (soft >= soft_count || obstacle < soft_count) {
+                    continue;  // soft-soft: no inside to test against
+                }
+                const auto& solid = obstacle_scene[obstacle - soft_count];
+                const Vec3 by = soft_first ? pen.vector : -pen.vector;
+                for (auto t : soft_first ? pen.triangles : pen.other_triangles) {
+                    for (auto n : world.soft[soft].triangles[t]) {
+                        const Vec3 at = next[soft][n];
+                        if (moved.count({soft, n}) != 0 || detail::winding_number(solid, at) == 0) {
+                            continue;
+                        }
+                        for (const Vec3& step : {by, -by}) {
+                            if (detail::winding_number(solid, at + step) == 0) {
+                                next[soft][n] = at + step;
+                                moved.insert({soft, n});
+                                break;
                             }
                         }
                     }
-                };
-                push(pen.object, pen.triangles, pen.vector);
-                push(pen.other, pen.other_triangles, -pen.vector);
+                }
             }
             if (!moved.empty()) {
                 for (const auto& [i, n] : moved) {
-                    world.soft[i].body->m_nodes[static_cast<int>(n)].m_x = to_bt(next[i][n]);
+                    auto& node = world.soft[i].body->m_nodes[static_cast<int>(n)];
+                    node.m_x = to_bt(next[i][n]);
+                    node.m_v.setZero();
                 }
                 pushed_nodes = moved.size();
                 ++totals.pushouts;
@@ -1076,7 +1101,9 @@ int run(const Args& args) {
                     {"rewind", args.rewind},
                     {"max_freeze", args.max_freeze},
                     {"inset", args.inset},
-                    {"limit", !args.no_limit},
+                    {"response", args.no_limit       ? "none"
+                                 : args.pushout_only ? "pushout"
+                                                     : "ccd"},
                     {"node_count", nodes},
                     {"triangle_count", triangles},
                     {"steps", std::move(log_steps)},
@@ -1158,6 +1185,10 @@ int run_main(int argc, char** argv) {
         "--no-limit", args.no_limit,
         "report contacts but keep Bullet's state as it is (no step limiting, no push-out): "
         "what Bullet alone does");
+    app.add_flag("--pushout-only", args.pushout_only,
+                 "no step limiting; only push soft triangles out of obstacles along the "
+                 "penetration vectors after the step")
+        ->excludes("--no-limit");
     app.add_flag("--quiet", args.quiet, "no per-step lines");
     try {
         app.parse(argc, argv);
