@@ -1,12 +1,13 @@
 // proxima-bullet: a Bullet soft-body simulation (Debian's libbullet-dev, the float64 build) that
 // streams its deformed nodes to proximad every step and uses the answers (issue #19):
-//   - CCD from the previous to the new node positions: when a contact's time of impact is found,
-//     every soft node is rewound to a fraction of the earliest time of impact (so no primitive
-//     pair ever passes through another between the states the client keeps) and the nodes of the
-//     contacting primitives lose their velocity;
+//   - CCD from the previous to the new node positions limits the step: the nodes of contacting
+//     primitives are frozen at the step's start and the step is checked again, a few rounds, then
+//     every node is rewound to a fraction of the earliest time of impact; so no primitive pair
+//     ever passes through another between the states the client keeps, and frozen nodes stop;
 //   - separation and self distances: near-contacts are reported;
 //   - penetration vectors: soft nodes still inside a static obstacle (Bullet's response failed and
 //     the state was already intersecting) are pushed out along the vector;
+// docs/simulators.md ("Bullet soft bodies") has the details and measured costs.
 //   - Bullet's own soft-rigid contacts (btSoftBody::m_rcontacts) are compared with the service's
 //     near-contacts and CCD contacts, and the disagreements are counted.
 // Headless; prints per-step timings (Bullet step, service round trip) and writes a JSON log.
