@@ -329,6 +329,14 @@ TEST(BulletExample, ClothSphereAnswersLikeTheEngineAndNothingPassesThrough) {
     EXPECT_GT(r["ccd_contacts_bullet_missed"].get<std::uint64_t>(), 0u);
 }
 
+// --max-freeze 0: every limited step takes the fallback, a rewind of every node to half the
+// earliest time of impact.
+TEST(BulletExample, RewindFallbackAnswersLikeTheEngineAndNothingPassesThrough) {
+    const auto r = run_and_check("cloth-sphere", 80, "--resolution 12 --max-freeze 0");
+    EXPECT_GT(r["rewind_count"].get<std::uint64_t>(), 0u);
+    EXPECT_EQ(r["rewind_count"], r["limited_step_count"]);
+}
+
 TEST(BulletExample, BallBowlAnswersLikeTheEngineAndNothingPassesThrough) {
     const auto r = run_and_check("ball-bowl", 150, "--resolution 20");
     // The ball squeezes into the seams between the bowl's boxes where Bullet lets nodes in.

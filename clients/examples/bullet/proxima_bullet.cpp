@@ -894,7 +894,7 @@ int run(const Args& args) {
                 return fail_stream(response.status());
             }
         }
-        if (freeze_rounds > 0) {
+        if (freeze_rounds > 0 || rewound_to) {
             ++totals.limited_steps;
             for (std::size_t i = 0; i < soft_count; ++i) {
                 auto* body = world.soft[i].body;
@@ -909,7 +909,7 @@ int run(const Args& args) {
         }
 
         std::size_t pushed_nodes = 0;
-        if (!args.no_limit && freeze_rounds == 0) {
+        if (!args.no_limit && freeze_rounds == 0 && !rewound_to) {
             // No contact along the step. Soft nodes inside a (closed) obstacle next to the
             // overlapping features of a penetration (a state that was already intersecting:
             // Bullet's response failed) are moved by the penetration vector, in the direction
