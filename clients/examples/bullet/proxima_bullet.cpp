@@ -488,6 +488,7 @@ class Session {
         std::vector<NamedMesh> objects;
         for (const auto& s : m_world.soft) {
             objects.push_back({s.name, TriangleMesh{positions(s), s.triangles}});
+            m_sent.push_back(objects.back().mesh.vertices);
         }
         for (const auto& o : m_world.obstacles) {
             objects.push_back({o.name, o.mesh});
@@ -577,6 +578,7 @@ class Session {
                 local->update.positions[i].object = m_local_ids[i];
             }
         }
+        m_sent = soft_positions;
         const auto start = std::chrono::steady_clock::now();
         if (auto st = m_stream->send(frame); !st.ok()) {
             return st;
@@ -603,6 +605,9 @@ class Session {
         return response;
     }
 
+    // The soft bodies' positions in the daemon's scene (the last frame sent).
+    const std::vector<std::vector<Vec3>>& sent() const { return m_sent; }
+
     std::uint64_t checked_frames = 0;
     std::uint64_t mismatches = 0;
     std::string first_mismatch;
@@ -618,6 +623,7 @@ class Session {
     std::unique_ptr<ProximityEngine> m_mirror;
     std::vector<ObjectId> m_local_ids;
     std::uint64_t m_frame = 0;
+    std::vector<std::vector<Vec3>> m_sent;
 };
 
 // --- The simulation loop ---------------------------------------------------------------------
@@ -760,6 +766,14 @@ int run(const Args& args) {
         std::vector<std::vector<Vec3>> prev;
         for (const auto& s : world.soft) {
             prev.push_back(Session::positions(s));
+        }
+        // CCD runs from the daemon's scene: it must be the state Bullet steps from.
+        if (prev != session.sent()) {
+            std::fprintf(stderr,
+                         "proxima-bullet: error: internal: Bullet's nodes differ from the daemon's "
+                         "scene at step %zu\n",
+                         step);
+            return 1;
         }
         const auto bullet_start = std::chrono::steady_clock::now();
         world.world().stepSimulation(args.dt, 0);
