@@ -7,10 +7,11 @@
 namespace proxima::client {
 
 StatusOr<std::vector<InputObject>> load_objects(const std::vector<std::string>& files,
-                                                bool split_components) {
+                                                bool split_components,
+                                                const MeshReadOptions& read_options) {
     std::vector<InputObject> out;
     for (const auto& file : files) {
-        auto mesh = read_mesh(file);
+        auto mesh = read_mesh(file, read_options);
         if (!mesh.ok()) {
             return mesh.status();
         }

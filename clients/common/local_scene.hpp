@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "proxima/io/mesh_io.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
 
@@ -19,7 +20,9 @@ struct InputObject {
     std::vector<std::uint32_t> file_triangle;
 };
 
+// `read_options`: how read_mesh reads each file (vertex welding on by default).
 StatusOr<std::vector<InputObject>> load_objects(const std::vector<std::string>& files,
-                                                bool split_components);
+                                                bool split_components,
+                                                const MeshReadOptions& read_options = {});
 
 }  // namespace proxima::client
