@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <system_error>
+#include <unordered_map>
 
 #include <nlohmann/json.hpp>
 
@@ -49,26 +50,50 @@ std::string quoted(const fs::path& path) {
     return out;
 }
 
-// DIR/sequence.json's "fps" (0 when the file is absent); a malformed file is an error.
-StatusOr<double> recorded_fps(const fs::path& dir) {
+// What DIR/sequence.json says: the rate and, per frame file, its objects' names.
+struct Recorded {
+    double fps = 0;
+    std::unordered_map<std::string, std::vector<std::string>> names;  // file name -> names
+};
+
+// DIR/sequence.json (nothing when the file is absent); a malformed file is an error.
+StatusOr<Recorded> read_recorded(const fs::path& dir) {
+    Recorded rec;
     const fs::path file = dir / "sequence.json";
     std::error_code ec;
     if (!fs::exists(file, ec)) {
-        return 0.0;
+        return rec;
     }
     std::ifstream in(file);
     const auto doc = nlohmann::json::parse(in, nullptr, false);
     if (in.bad() || doc.is_discarded() || !doc.is_object()) {
         return invalid_argument(quoted(file) + " is not a JSON object");
     }
-    if (!doc.contains("fps")) {
-        return 0.0;
+    if (doc.contains("fps")) {
+        const auto& fps = doc["fps"];
+        if (!fps.is_number() || !(fps.get<double>() > 0.0) || !(fps.get<double>() <= 1e6)) {
+            return invalid_argument(quoted(file) + ": \"fps\" must be a number in (0, 1e6]");
+        }
+        rec.fps = fps.get<double>();
     }
-    const auto& fps = doc["fps"];
-    if (!fps.is_number() || !(fps.get<double>() > 0.0) || !(fps.get<double>() <= 1e6)) {
-        return invalid_argument(quoted(file) + ": \"fps\" must be a number in (0, 1e6]");
+    if (doc.contains("frames") && doc["frames"].is_array()) {
+        for (const auto& f : doc["frames"]) {
+            if (!f.is_object() || !f.contains("file") || !f["file"].is_string() ||
+                !f.contains("objects") || !f["objects"].is_array()) {
+                continue;
+            }
+            std::vector<std::string> names;
+            for (const auto& n : f["objects"]) {
+                if (n.is_string()) {
+                    names.push_back(n.get<std::string>());
+                }
+            }
+            if (names.size() == f["objects"].size()) {
+                rec.names[f["file"].get<std::string>()] = std::move(names);
+            }
+        }
     }
-    return fps.get<double>();
+    return rec;
 }
 
 }  // namespace
@@ -167,13 +192,13 @@ StatusOr<Sequence> load_sequence(const std::string& dir, const SequenceOptions& 
                                 std::to_string(n) + " frames, numbered 0.." +
                                 std::to_string(n - 1) + ")");
     }
-    auto fps = recorded_fps(dir);
-    if (!fps.ok()) {
-        return fps.status();
+    auto recorded = read_recorded(dir);
+    if (!recorded.ok()) {
+        return recorded.status();
     }
     Sequence seq;
     seq.dir = dir;
-    seq.fps = fps.value();
+    seq.fps = recorded->fps;
     for (std::size_t k = options.begin; k < std::min(n, options.end); ++k) {
         const std::string& file = (*files)[k];
         MeshReadOptions read;
@@ -187,6 +212,14 @@ StatusOr<Sequence> load_sequence(const std::string& dir, const SequenceOptions& 
             return invalid_argument("frame " + std::to_string(k) + " ('" + file +
                                     "') holds no object");
         }
+        // Object names recorded in sequence.json (as many as the file's objects) replace the
+        // FILE#COMPONENT names: they say which object broke into which pieces.
+        auto named = recorded->names.find(fs::path(file).filename().string());
+        if (named != recorded->names.end() && named->second.size() == objects->size()) {
+            for (std::size_t i = 0; i < objects->size(); ++i) {
+                (*objects)[i].mesh.name = named->second[i];
+            }
+        }
         seq.frames.push_back({file, k, std::move(objects).value()});
     }
     return seq;
@@ -195,6 +228,55 @@ StatusOr<Sequence> load_sequence(const std::string& dir, const SequenceOptions& 
 bool same_topology(const TriangleMesh& a, const TriangleMesh& b) {
     return a.vertices.size() == b.vertices.size() && a.triangles == b.triangles;
 }
+
+namespace {
+
+// "ball3" -> "ball3.piece0", "ball3/2", "ball3#1": a piece's name starts with its object's name
+// and a separator (or is the same name).
+bool piece_of(const std::string& object, const std::string& piece) {
+    if (piece == object) {
+        return true;
+    }
+    return piece.size() > object.size() && piece.compare(0, object.size(), object) == 0 &&
+           (piece[object.size()] == '.' || piece[object.size()] == '/' ||
+            piece[object.size()] == '#');
+}
+
+// The middle runs (prev[p, p + old_mid), next[p, p + new_mid)) as pieces by name: each old object
+// is replaced by the run of new objects named as its pieces (removed when it has none). False
+// (nothing added to `update`) when the names do not say so for every new object, in order.
+bool split_by_name(const std::vector<InputObject>& prev, const std::vector<ObjectId>& ids,
+                   const std::vector<InputObject>& next, std::size_t p, std::size_t old_mid,
+                   std::size_t new_mid, SceneUpdate& update) {
+    std::vector<std::pair<std::size_t, std::size_t>> runs;  // per old object: [begin, end)
+    std::size_t j = p;
+    for (std::size_t i = p; i < p + old_mid; ++i) {
+        const std::size_t begin = j;
+        while (j < p + new_mid && piece_of(prev[i].mesh.name, next[j].mesh.name)) {
+            ++j;
+        }
+        runs.emplace_back(begin, j);
+    }
+    if (j != p + new_mid) {
+        return false;
+    }
+    for (std::size_t i = p; i < p + old_mid; ++i) {
+        const auto [begin, end] = runs[i - p];
+        if (begin == end) {
+            update.removals.push_back(ids[i]);
+            continue;
+        }
+        SceneUpdate::Replacement rep;
+        rep.object = ids[i];
+        for (std::size_t k = begin; k < end; ++k) {
+            rep.fragments.push_back(next[k].mesh);
+        }
+        update.replacements.push_back(std::move(rep));
+    }
+    return true;
+}
+
+}  // namespace
 
 FrameDiff diff_frames(const std::vector<InputObject>& prev, const std::vector<ObjectId>& ids,
                       const std::vector<InputObject>& next) {
@@ -242,6 +324,9 @@ FrameDiff diff_frames(const std::vector<InputObject>& prev, const std::vector<Ob
     }
     const std::size_t old_mid = m - p - s;
     const std::size_t new_mid = n - p - s;
+    if (old_mid > 0 && split_by_name(prev, ids, next, p, old_mid, new_mid, diff.update)) {
+        return diff;
+    }
     if (old_mid == 0) {
         for (std::size_t j = p; j < p + new_mid; ++j) {
             diff.update.additions.push_back(next[j].mesh);

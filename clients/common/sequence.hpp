@@ -27,7 +27,8 @@ struct SequenceFrame {
 struct Sequence {
     std::string dir;
     // The recorded rate (frames per second) from DIR/sequence.json {"fps": N}; 0 when the folder
-    // does not say.
+    // does not say. Its "frames": [{"file": NAME, "objects": [names]}] (as `proxima generate
+    // sequence` writes it) names the objects of a frame file when the counts agree.
     double fps = 0;
     std::vector<SequenceFrame> frames;
 };
@@ -66,7 +67,10 @@ bool same_topology(const TriangleMesh& a, const TriangleMesh& b);
 //  - a different number: the longest runs of same-topology objects at the front and back keep
 //    their ids and get positions; the first object between them is replaced by all new objects
 //    between them (an object breaking into pieces: its fragments take its place), the other old
-//    ones between them are removed; objects appended after all old ones are additions.
+//    ones between them are removed; objects appended after all old ones are additions. When the
+//    names say which new objects are pieces of which old one ("ball3" -> "ball3.piece0",
+//    "ball3.piece1", ...; separators '.', '/', '#'), each old object between the runs is
+//    replaced by its own pieces instead (removed when it has none).
 struct FrameDiff {
     SceneUpdate update;
     bool topology_change = false;
