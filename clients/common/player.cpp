@@ -118,7 +118,8 @@ class Driver {
     // Waits for frame k's slot (fps pacing); returns how late it is, in ms.
     double pace(std::size_t k) {
         if (k == 0) {
-            m_start = Clock::now();
+            m_start = Clock::now();  // frame 0's slot: now
+            return 0.0;
         }
         if (m_options.fps <= 0.0) {
             return 0.0;
