@@ -9,6 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "proxima/io/md2.hpp"
+#include "proxima/mesh/mesh.hpp"
+
 namespace proxima::client {
 
 namespace {
@@ -176,21 +179,83 @@ StatusOr<std::vector<std::string>> list_frame_files(const std::string& dir) {
     return paths;
 }
 
+namespace {
+
+// One keyframe's objects: the whole model, or each connected component (as load_objects does).
+std::vector<InputObject> keyframe_objects(const std::string& file, TriangleMesh mesh, bool split) {
+    std::vector<InputObject> out;
+    if (!split) {
+        InputObject obj;
+        obj.file = file;
+        obj.mesh.name = file;
+        obj.file_triangle.resize(mesh.triangles.size());
+        for (std::size_t t = 0; t < obj.file_triangle.size(); ++t) {
+            obj.file_triangle[t] = static_cast<std::uint32_t>(t);
+        }
+        obj.mesh.mesh = std::move(mesh);
+        out.push_back(std::move(obj));
+        return out;
+    }
+    auto parts = proxima::split_components(mesh);
+    for (std::size_t c = 0; c < parts.meshes.size(); ++c) {
+        InputObject obj;
+        obj.file = file;
+        obj.component = static_cast<std::int64_t>(c);
+        obj.mesh.name = file + "#" + std::to_string(c);
+        obj.mesh.mesh = std::move(parts.meshes[c]);
+        obj.file_triangle = std::move(parts.triangle_ids[c]);
+        out.push_back(std::move(obj));
+    }
+    return out;
+}
+
+Status no_frame_selected(const std::string& dir, const SequenceOptions& options, std::size_t n) {
+    std::string range = std::to_string(options.begin);
+    range += ':';
+    if (options.end != std::numeric_limits<std::size_t>::max()) {
+        range += std::to_string(options.end);
+    }
+    return invalid_argument("--frames " + range + " selects no frame of '" + dir + "' (" +
+                            std::to_string(n) + " frames, numbered 0.." + std::to_string(n - 1) +
+                            ")");
+}
+
+StatusOr<Sequence> load_md2_sequence(const std::string& path, const SequenceOptions& options) {
+    auto md2 = read_md2(path);
+    if (!md2.ok()) {
+        return md2.status();
+    }
+    const std::size_t n = md2->frames.size();
+    if (options.begin >= n || options.end <= options.begin) {
+        return no_frame_selected(path, options, n);
+    }
+    Sequence seq;
+    seq.dir = path;
+    seq.fps = MD2_KEYFRAME_FPS;
+    for (std::size_t k = options.begin; k < std::min(n, options.end); ++k) {
+        TriangleMesh mesh;
+        mesh.vertices = std::move(md2->frames[k]);
+        mesh.triangles = md2->triangles;
+        seq.frames.push_back(
+            {path, k, keyframe_objects(path, std::move(mesh), options.split_components)});
+    }
+    return seq;
+}
+
+}  // namespace
+
 StatusOr<Sequence> load_sequence(const std::string& dir, const SequenceOptions& options) {
+    std::error_code file_ec;
+    if (ends_with(lower(dir), ".md2") && fs::is_regular_file(dir, file_ec)) {
+        return load_md2_sequence(dir, options);
+    }
     auto files = list_frame_files(dir);
     if (!files.ok()) {
         return files.status();
     }
     const std::size_t n = files->size();
     if (options.begin >= n || options.end <= options.begin) {
-        std::string range = std::to_string(options.begin);
-        range += ':';
-        if (options.end != std::numeric_limits<std::size_t>::max()) {
-            range += std::to_string(options.end);
-        }
-        return invalid_argument("--frames " + range + " selects no frame of '" + dir + "' (" +
-                                std::to_string(n) + " frames, numbered 0.." +
-                                std::to_string(n - 1) + ")");
+        return no_frame_selected(dir, options, n);
     }
     auto recorded = read_recorded(dir);
     if (!recorded.ok()) {

@@ -33,6 +33,9 @@ struct Sequence {
     std::vector<SequenceFrame> frames;
 };
 
+// Quake II steps its MD2 animations at its 10 Hz server rate: an MD2's recorded rate.
+inline constexpr double MD2_KEYFRAME_FPS = 10.0;
+
 struct SequenceOptions {
     bool split_components = false;
     // Merge vertices with bit-identical positions within a file (read_mesh's default, and
@@ -54,6 +57,9 @@ StatusOr<std::vector<std::string>> list_frame_files(const std::string& dir);
 
 // Reads the folder (every file of the range, up front, so that file reading is not part of a
 // frame's latency). Errors name the file; a frame without objects is invalid_argument.
+// `dir` may also be a Quake II MD2 model (a file ending in .md2, proxima/io/md2.hpp): its
+// keyframes are the frames (one topology, so every frame after the first moves vertices only),
+// recorded at MD2_KEYFRAME_FPS, and every frame's `file` is the model.
 StatusOr<Sequence> load_sequence(const std::string& dir, const SequenceOptions& options = {});
 
 // Same vertex count and the same triangles.

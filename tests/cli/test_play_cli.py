@@ -9,6 +9,7 @@
   topology change): --local and --server agree, and every frame's closest distance and collision
   count equal `proxima demo` running the same procedural scene in-process;
 - one real frames pair from ../shared/data/frames (skipped, saying so, when the folder is absent);
+- a Quake II MD2 model written here: its keyframes play like the same frames as OBJ files;
 - errors: a missing folder, a folder without meshes, an unreadable frame, --frames out of range,
   usage errors (exit 2).
 Usage: test_play_cli.py PROXIMA PROXIMAD [DATA_DIR]
@@ -16,6 +17,7 @@ Usage: test_play_cli.py PROXIMA PROXIMAD [DATA_DIR]
 import json
 import os
 import shutil
+import struct
 import sys
 import tempfile
 import unittest
@@ -57,6 +59,34 @@ def write_obj(path, parts):
             out.write("v " + " ".join(repr(float(c)) for c in p) + "\n")
         for t in faces:
             out.write("f " + " ".join(str(i + 1) for i in t) + "\n")
+
+
+def f32(x):
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def write_md2(path, triangles, keyframes):
+    """A Quake II MD2 model: `keyframes` is a list of (scale, translate, [(x, y, z) bytes]).
+    Returns each keyframe's positions as the reader computes them (in double)."""
+    nv, nt, nf = len(keyframes[0][2]), len(triangles), len(keyframes)
+    frame_size = 40 + 4 * nv
+    ofs_tris = 68
+    ofs_frames = ofs_tris + 12 * nt
+    ofs_end = ofs_frames + nf * frame_size
+    out = b"IDP2" + struct.pack("<16i", 8, 64, 64, frame_size, 0, nv, 0, nt, 0, nf, 68, 68,
+                                 ofs_tris, ofs_frames, ofs_end, ofs_end)
+    for t in triangles:
+        out += struct.pack("<6H", *t, 0, 0, 0)
+    positions = []
+    for k, (scale, translate, verts) in enumerate(keyframes):
+        out += struct.pack("<6f", *scale, *translate) + f"key{k}".encode().ljust(16, b"\0")
+        for v in verts:
+            out += struct.pack("<4B", *v, 0)
+        positions.append([tuple(f32(scale[i]) * v[i] + f32(translate[i]) for i in range(3))
+                          for v in verts])
+    with open(path, "wb") as f:
+        f.write(out)
+    return positions
 
 
 # The moving box's x offset per frame: approaching, touching, passing through the fixed box.
@@ -158,6 +188,42 @@ class Play(unittest.TestCase):
         self.assertIn("at 200 frames/s", lines[0])
         self.assertEqual(len(lines), 2 + len(OFFSETS) + 1, p.stdout)
         self.assertTrue(lines[-1].startswith(f"play: {len(OFFSETS)} frames (0 topology changes)"))
+
+    def test_md2_keyframes(self):
+        """An MD2 model (two tetrahedra closing in on each other over four keyframes) plays like
+        the same frames written as numbered OBJ files."""
+        tet = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+        triangles = tet + [tuple(i + 4 for i in t) for t in tet]
+        keyframes = []
+        for k in range(4):
+            a = [(0, 0, 0), (20, 0, 0), (0, 20, 0), (0, 0, 20)]
+            b = [(v[0] + 120 - 25 * k, v[1] + 5, v[2] + 5) for v in a]
+            keyframes.append(((0.05, 0.05, 0.05), (0.25 * k, -1.0, 0.5), a + b))
+        md2 = os.path.join(self.tmp, "tets.md2")
+        positions = write_md2(md2, triangles, keyframes)
+        obj_dir = os.path.join(self.tmp, "tets-obj")
+        os.makedirs(obj_dir)
+        for k, verts in enumerate(positions):
+            write_obj(os.path.join(obj_dir, f"key_{k}.obj"), [(verts, triangles)])
+        query = ("--split-components", "--query", "separation,self,collisions,ccd",
+                 "--as-fast-as-answered")
+        from_md2 = self.play_both(md2, *query)
+        from_obj = self.play("--local", obj_dir, *query)
+        self.assertEqual(len(from_md2), 4)
+        self.assertTrue(all(d["file"] == md2 for d in from_md2))
+        strip = lambda d: {k: v for k, v in d.items() if k != "file"}  # noqa: E731
+        self.assertEqual([strip(d) for d in answers(from_md2)],
+                         [strip(d) for d in answers(from_obj)])
+        self.assertEqual([d["object_count"] for d in from_md2], [2] * 4)
+        # MD2 keyframes are recorded at 10 frames/s.
+        p = run_program(PROXIMA, "play", md2, "--frames", "0:2")
+        self.assertEqual(p.returncode, 0, p.stderr)
+        self.assertIn("at 10 frames/s", p.stdout.splitlines()[0])
+        with open(os.path.join(self.tmp, "broken.md2"), "wb") as f:
+            f.write(b"IDP2" + b"\0" * 30)
+        p = run_program(PROXIMA, "play", os.path.join(self.tmp, "broken.md2"))
+        self.assertEqual(p.returncode, 1)
+        self.assertIn("not a valid MD2 file", p.stderr)
 
     def test_breaking_sequence(self):
         self.assertEqual(self.generated["frame_count"], 6)
