@@ -1,11 +1,11 @@
 // proxima play: the recorded-sequence player. Streams a folder of numbered mesh files (one file
 // per frame; the objects of a frame are the file, or with --split-components its connected
-// components) through the engine in this process (--local, the default) or to a proximad daemon
-// (--server), at the recorded rate (DIR/sequence.json {"fps": N}, or --fps N) or as fast as
-// answered, with the chosen queries, and prints one line per frame (one JSON object per frame with
-// --json) and a summary. A frame whose objects keep their topology moves vertices; any other is a
-// topology change mid-stream (common/sequence.hpp: diff_frames). The player itself is
-// common/player.hpp, shared with the load harness.
+// components), or the keyframes of an MD2 model, through the engine in this process (--local,
+// the default) or to a proximad daemon (--server), at the recorded rate (DIR/sequence.json
+// {"fps": N}, or --fps N) or as fast as answered, with the chosen queries, and prints one line
+// per frame (one JSON object per frame with --json) and a summary. A frame whose objects keep
+// their topology moves vertices; any other is a topology change mid-stream (common/sequence.hpp:
+// diff_frames). The player itself is common/player.hpp, shared with the load harness.
 
 #include <unistd.h>
 
@@ -345,7 +345,9 @@ void add_play_command(CLI::App& app, int& exit_code) {
         "Play a recorded sequence (a folder of numbered mesh files, one per frame) through the "
         "engine or a daemon, with per-frame results and latency");
     args->command = cmd;
-    cmd->add_option("dir", args->dir, "The sequence folder (frame_000.obj, frame_001.obj, ...)")
+    cmd->add_option("dir", args->dir,
+                    "The sequence: a folder of numbered mesh files (frame_000.obj, "
+                    "frame_001.obj, ...) or a Quake II MD2 model (its keyframes)")
         ->required();
     auto* local_flag =
         cmd->add_flag("--local", args->local, "Run the engine in this process (the default)");
