@@ -38,6 +38,7 @@ struct PlayArgs {
     ServerFlags server_flags;
     double fps = 0.0;
     bool as_fast = false;
+    std::size_t in_flight = 1;
     std::vector<std::string> queries{"separation"};
     double tolerance = -1.0;
     double ccd_min_distance = 0.0;
@@ -260,6 +261,7 @@ int run_play(const PlayArgs& args) {
     options.ccd_min_distance = args.ccd_min_distance;
     options.fps = args.as_fast ? 0.0 : args.fps > 0.0 ? args.fps : seq.fps;
     options.keep_results = false;
+    options.in_flight = args.in_flight;
     // With --culler voronoi-gpu a local engine starts its own headless EGL context (as the daemon
     // does once at start-up); without one the frames fail with EGL's reason.
     options.prepare_engine = [&](ProximityEngine& engine) {
@@ -362,6 +364,12 @@ void add_play_command(CLI::App& app, int& exit_code) {
     cmd->add_flag("--as-fast-as-answered", args->as_fast,
                   "Send each frame as soon as the previous one is answered")
         ->excludes(fps);
+    cmd->add_option("--in-flight", args->in_flight,
+                    "With --server: frames sent ahead of their answers (pipelining; at most the "
+                    "daemon's max_frames_in_flight); 1 is lockstep")
+        ->check(whole_number(1, 1024))
+        ->capture_default_str()
+        ->needs(server_opt);
     cmd->add_option("--query", args->queries,
                     "Comma-separated: separation, self, collisions, tolerance, ccd")
         ->delimiter(',')

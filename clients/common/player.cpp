@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <string>
 #include <thread>
@@ -285,18 +286,30 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         return Status(st.code(), st.message() + " (stream to the daemon broke at frame " +
                                      std::to_string(k) + ")");
     };
-    Driver driver(sequence, options);
-    for (std::size_t k = 0; k < sequence.frames.size(); ++k) {
-        bool topology_change = false;
-        FrameRequest frame = driver.request(k, ids, topology_change);
-        PlayedFrame played = driver.start_frame(k, topology_change);
-        played.late_ms = driver.pace(k);
-        const auto sent = Clock::now();
-        if (Status st = frames.send(frame); !st.ok()) {
-            return broken(st, k);
+    // Frames in flight: up to options.in_flight, never more than the daemon reads ahead (so a
+    // send never waits on the daemon while this thread is not reading its answers).
+    std::size_t window = std::max<std::size_t>(1, options.in_flight);
+    if (window > 1) {
+        auto info = client.server_info();
+        if (!info.ok()) {
+            return info.status();
         }
+        window =
+            std::min<std::size_t>(window, std::max<std::uint32_t>(1, info->max_frames_in_flight));
+    }
+    Driver driver(sequence, options);
+    struct Pending {
+        PlayedFrame frame;
+        Clock::time_point sent;
+    };
+    std::deque<Pending> pending;
+    // Reads the oldest answer; the scene's ids after it.
+    auto receive_one = [&]() -> Status {
+        Pending p = std::move(pending.front());
+        pending.pop_front();
+        const std::size_t k = p.frame.index;
         auto response = frames.receive();
-        played.latency_ms = ms_between(sent, Clock::now());
+        p.frame.latency_ms = ms_between(p.sent, Clock::now());
         if (!response.ok()) {
             return broken(response.status(), k);
         }
@@ -304,9 +317,37 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         if (Status st = check_ids(ids, sequence.frames[k], k, "the daemon's scene"); !st.ok()) {
             return st;
         }
-        played.result = std::move(response->result);
-        played.ccd = std::move(response->ccd);
-        if (Status st = driver.finish_frame(report, std::move(played)); !st.ok()) {
+        p.frame.result = std::move(response->result);
+        p.frame.ccd = std::move(response->ccd);
+        return driver.finish_frame(report, std::move(p.frame));
+    };
+    for (std::size_t k = 0; k < sequence.frames.size(); ++k) {
+        // A topology change gives new objects new ids, which the next frame's update names: its
+        // answer comes first. Frames that only move vertices keep the ids.
+        const bool wait_for_ids = !pending.empty() && pending.back().frame.topology_change;
+        while (!pending.empty() && (wait_for_ids || pending.size() >= window)) {
+            if (Status st = receive_one(); !st.ok()) {
+                return st;
+            }
+        }
+        bool topology_change = false;
+        FrameRequest frame = driver.request(k, ids, topology_change);
+        PlayedFrame played = driver.start_frame(k, topology_change);
+        played.late_ms = driver.pace(k);
+        const auto sent = Clock::now();
+        if (Status st = frames.send(frame); !st.ok()) {
+            // The stream may have ended on an earlier frame's error: that one is the cause.
+            while (!pending.empty()) {
+                if (Status earlier = receive_one(); !earlier.ok()) {
+                    return earlier;
+                }
+            }
+            return broken(st, k);
+        }
+        pending.push_back({std::move(played), sent});
+    }
+    while (!pending.empty()) {
+        if (Status st = receive_one(); !st.ok()) {
             return st;
         }
     }

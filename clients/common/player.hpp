@@ -4,12 +4,13 @@
 // returns, and the load harness can drive a daemon with it as a simulator client would.
 //
 // Remote: the first frame's objects create a scene (CreateScene; large meshes are uploaded in
-// chunks), one frame stream runs every frame in lockstep (send, read its answer), and the scene
-// is deleted at the end. Local: a ProximityEngine holds the first frame's objects and every frame
-// goes through run_frame, the pipeline the daemon runs, so both modes give the same answers.
-// Frame k is diff_frames(frame k-1, frame k): positions only, or a topology change. Result object
-// indices are positions in the frame's own object list (the update keeps that order; the player
-// checks that the daemon's scene has exactly those objects).
+// chunks), one frame stream carries every frame (in lockstep by default, send then read its
+// answer; PlayOptions::in_flight pipelines), and the scene is deleted at the end. Local: a
+// ProximityEngine holds the first frame's objects and every frame goes through run_frame, the
+// pipeline the daemon runs, so both modes give the same answers. Frame k is diff_frames(frame k-1,
+// frame k): positions only, or a topology change. Result object indices are positions in the
+// frame's own object list (the update keeps that order; the player checks that the daemon's scene
+// has exactly those objects).
 
 #include <cstddef>
 #include <functional>
@@ -35,6 +36,10 @@ struct PlayOptions {
     // Pacing: frame k is sent at start + k / fps (never before; at once when the previous answer
     // came later); 0 sends each frame as soon as the previous one is answered.
     double fps = 0.0;
+    // play_remote: frames sent before the oldest is answered (pipelining), at most the daemon's
+    // max_frames_in_flight; 1 is lockstep. A frame after a topology change waits for that frame's
+    // answer (the new objects' ids). Latency is then send to answer, queueing included.
+    std::size_t in_flight = 1;
     // Keep every frame's full result in the report (else only the summaries; on_frame still sees
     // the full frame).
     bool keep_results = true;

@@ -232,6 +232,12 @@ class Play(unittest.TestCase):
                                 "separation,collisions,ccd")
         self.assertEqual([d["topology_change"] for d in frames],
                          [False, False, False, True, False, False])
+        # Pipelined (frames sent ahead of their answers, waiting only for the topology change's
+        # new ids): the same answers.
+        pipelined = self.play("--server", self.daemon.address, "--in-flight", "4",
+                              self.broken_dir, "--split-components", "--query",
+                              "separation,collisions,ccd")
+        self.assertEqual(answers(pipelined), answers(frames))
         self.assertEqual([d["object_count"] for d in frames], [5, 5, 5, 25, 25, 25])
         # No CCD across the topology change, CCD on the others.
         self.assertEqual([d["ccd"] is None for d in frames], [True, False, False, True, False,
@@ -297,6 +303,7 @@ class Play(unittest.TestCase):
         fails(2, self.obj_dir, "--query", "tolerance", says="--tolerance")
         fails(2, self.obj_dir, "--query", "separation,volume")
         fails(2, self.obj_dir, "--fps", "10", "--as-fast-as-answered")
+        fails(2, self.obj_dir, "--in-flight", "4")  # needs --server
         fails(1, self.obj_dir, "--server", "127.0.0.1:1", says="UNAVAILABLE")
 
 
