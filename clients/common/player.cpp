@@ -91,8 +91,8 @@ void summarise(PlayedFrame& f) {
     f.engine_ms = (f.result.stats.total_seconds + (f.ccd ? f.ccd->stats.total_seconds : 0.0)) * 1e3;
 }
 
-// What both modes share: the frame requests, pacing, summaries and the report. `run` sends one
-// frame and returns its outcome and latency; `ids` are the scene's object ids after the frame.
+// What both modes share: the frame requests (from the scene's object ids after the previous
+// frame), pacing, the checks and summaries of each answer, and the report.
 class Driver {
   public:
     Driver(const Sequence& sequence, const PlayOptions& options)
