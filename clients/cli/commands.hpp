@@ -27,6 +27,9 @@ void add_import_command(CLI::App& app, int& exit_code);
 // proxima generate plant|building: deterministic test models as files
 // (clients/cli/generate_command.cpp).
 void add_generate_command(CLI::App& app, int& exit_code);
+// proxima play: a recorded sequence through the engine or a daemon
+// (clients/cli/play_command.cpp).
+void add_play_command(CLI::App& app, int& exit_code);
 // proxima models, verify and review: massive models on a daemon or in a local store
 // (clients/cli/massive_command.cpp).
 void add_massive_commands(CLI::App& app, int& exit_code);

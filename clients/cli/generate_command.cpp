@@ -4,7 +4,11 @@
 //     double coordinates: exact, and about 4x smaller and 20x faster to write than OFF text),
 //     listed in DIR/scene.json (format proxima-scene/1, no transforms);
 //   proxima generate building --furniture DIR --triangles 2M --seed 1 --out DIR
-//     the furnished building (engine: generate_building).
+//     the furnished building (engine: generate_building);
+//   proxima generate sequence --scene breaking --frames 16 --fps 30 --dir DIR
+//     a procedural scene (engine: scenes::by_name) recorded for `proxima play`: one binary PLY per
+//     frame, DIR/frame_0000.ply, ... (the frame's objects are the file's connected components,
+//     in scene order), and DIR/sequence.json (the rate, and each frame's object names).
 // Both print a one-line JSON summary on standard output, progress on standard error.
 
 #include <algorithm>
@@ -27,6 +31,7 @@
 #include "common/progress.hpp"
 #include "proxima/io/mesh_io.hpp"
 #include "proxima/massive/generator.hpp"
+#include "proxima/scenes/procedural.hpp"
 
 namespace proxima::cli {
 
@@ -44,6 +49,9 @@ StatusOr<std::uint64_t> parse_triangles(const std::string& text) {
 }
 
 struct GenerateArgs {
+    std::string scene;
+    std::size_t frames = 16;
+    double fps = 30.0;
     std::string triangles;
     std::uint64_t seed = 1;
     std::string out;
@@ -229,11 +237,108 @@ int run_building(const GenerateArgs& args) {
         args.output, generated_line("building", generated->summary.triangles, args.out));
 }
 
+// A procedural scene recorded frame by frame: each frame's objects concatenated into one mesh (the
+// objects are its connected components, in order), so `proxima play --split-components` streams
+// it back with the same objects, and a break (replacement by fragments) is a topology change.
+int run_sequence(const GenerateArgs& args) {
+    const auto start = std::chrono::steady_clock::now();
+    auto procedural = scenes::by_name(args.scene, args.frames);
+    if (procedural.name.empty()) {
+        return fail(invalid_argument("unknown scene '" + args.scene +
+                                     "' (expected skirt, cloth-ball, bowl, ramps or breaking)"));
+    }
+    const fs::path out(args.out);
+    std::error_code ec;
+    fs::create_directories(out, ec);
+    if (ec) {
+        return fail(Status(StatusCode::unavailable,
+                           "cannot create '" + out.string() + "': " + ec.message()));
+    }
+    client::ProgressPrinter printer(args.quiet);
+    Scene scene;
+    nlohmann::ordered_json frames = nlohmann::ordered_json::array();
+    std::string buffer;
+    Aabb box;
+    std::size_t topology_changes = 0;
+    TriangleMesh frame_mesh;
+    for (std::size_t k = 0; k < procedural.frame_count; ++k) {
+        SceneUpdate update;
+        if (k == 0) {
+            update.additions = procedural.initial;
+        } else {
+            update = procedural.step(k, scene);
+        }
+        const bool topology_change =
+            k > 0 &&
+            (!update.replacements.empty() || !update.additions.empty() || !update.removals.empty());
+        topology_changes += topology_change ? 1 : 0;
+        if (auto applied = scene.apply(std::move(update)); !applied.ok()) {
+            return fail(applied.status());
+        }
+        frame_mesh.vertices.clear();
+        frame_mesh.triangles.clear();
+        nlohmann::ordered_json names = nlohmann::ordered_json::array();
+        for (const auto& obj : scene.objects()) {
+            const auto base = static_cast<std::uint32_t>(frame_mesh.vertices.size());
+            frame_mesh.vertices.insert(frame_mesh.vertices.end(), obj.vertices.begin(),
+                                       obj.vertices.end());
+            for (const auto& t : obj.topology->triangles()) {
+                frame_mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+            }
+            box.extend(obj.box);
+            names.push_back(obj.name);
+        }
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%04zu.ply", k);
+        if (Status s = write_ply((out / name).string(), frame_mesh, buffer); !s.ok()) {
+            return fail(s);
+        }
+        nlohmann::ordered_json entry;
+        entry["file"] = name;
+        entry["topology_change"] = topology_change;
+        entry["object_count"] = scene.size();
+        entry["triangle_count"] = frame_mesh.triangles.size();
+        entry["objects"] = std::move(names);
+        frames.push_back(std::move(entry));
+        printer.update({"writing frames", k + 1, procedural.frame_count, "frames"});
+    }
+    printer.finish();
+    nlohmann::ordered_json doc;
+    doc["format"] = "proxima-sequence/1";
+    doc["scene"] = procedural.name;
+    doc["description"] = procedural.description;
+    doc["fps"] = args.fps;
+    doc["frame_count"] = procedural.frame_count;
+    doc["frames"] = std::move(frames);
+    const std::string sequence_file = (out / "sequence.json").string();
+    {
+        std::ofstream file(sequence_file, std::ios::binary | std::ios::trunc);
+        file << doc.dump(1) << '\n';
+        if (!file.good()) {
+            return fail(Status(StatusCode::unavailable, "cannot write '" + sequence_file + "'"));
+        }
+    }
+    const nlohmann::json summary = {{"model", "sequence"},
+                                    {"object_count", scene.size()},
+                                    {"triangle_count", frame_mesh.triangles.size()},
+                                    {"vertex_count", frame_mesh.vertices.size()},
+                                    {"box", client::box_json(box)},
+                                    {"scene", sequence_file},
+                                    {"frame_count", procedural.frame_count},
+                                    {"topology_change_count", topology_changes},
+                                    {"seconds", seconds_since(start)}};
+    return emit_json(summary, args.output,
+                     "generate: " + std::to_string(procedural.frame_count) + " frames of " +
+                         procedural.name + " in " + args.out);
+}
+
 }  // namespace
 
 void add_generate_command(CLI::App& app, int& exit_code) {
     auto* cmd = app.add_subcommand(
-        "generate", "Write a deterministic test model (procedural plant or furnished building)");
+        "generate",
+        "Write a deterministic test model (procedural plant or furnished building) or a "
+        "procedural frame sequence");
     cmd->require_subcommand(1);
 
     auto plant = std::make_shared<GenerateArgs>();
@@ -280,6 +385,29 @@ void add_generate_command(CLI::App& app, int& exit_code) {
     building_cmd->add_flag("--quiet", building->quiet, "No progress on standard error");
     add_json_output(*building_cmd, building->output, true);
     building_cmd->callback([building, &exit_code] { exit_code = run_building(*building); });
+
+    auto sequence = std::make_shared<GenerateArgs>();
+    sequence->scene = "breaking";
+    auto* sequence_cmd = cmd->add_subcommand(
+        "sequence",
+        "A procedural deforming scene recorded for proxima play: OUT/frame_0000.ply, ... (objects "
+        "as connected components) and OUT/sequence.json");
+    sequence_cmd
+        ->add_option("--scene", sequence->scene,
+                     "skirt, cloth-ball, bowl, ramps or breaking (objects break into pieces "
+                     "halfway: a topology change)")
+        ->capture_default_str();
+    sequence_cmd->add_option("--frames", sequence->frames, "Number of frames")
+        ->check(whole_number(1, 100000))
+        ->capture_default_str();
+    sequence_cmd->add_option("--fps", sequence->fps, "The recorded rate (sequence.json)")
+        ->check(finite_number(0.0, true))
+        ->capture_default_str();
+    sequence_cmd->add_option("--dir", sequence->out, "Output directory (created if absent)")
+        ->required();
+    sequence_cmd->add_flag("--quiet", sequence->quiet, "No progress on standard error");
+    add_json_output(*sequence_cmd, sequence->output, true);
+    sequence_cmd->callback([sequence, &exit_code] { exit_code = run_sequence(*sequence); });
 }
 
 }  // namespace proxima::cli

@@ -224,6 +224,25 @@ class JsonOutput(unittest.TestCase):
                           self.daemon.address, lines=True)
         self.assertTrue(all(d["round_trip_ms"] > 0 for d in docs))
 
+    def test_play(self):
+        # A two-frame sequence: the ccd frames' boxes, played with every query.
+        seq = os.path.join(self.tmp, "sequence")
+        os.makedirs(seq, exist_ok=True)
+        shutil.copy(self.t0, os.path.join(seq, "frame_0.off"))
+        shutil.copy(self.t1, os.path.join(seq, "frame_1.off"))
+        for extra in ((), ("--server", self.daemon.address)):
+            docs = self.check("play", "play", "--json", seq, "--split-components", "--query",
+                              "separation,self,collisions,ccd", "--tolerance", "0.1", *extra,
+                              lines=True)
+            self.assertEqual([d["frame"] for d in docs], [0, 1])
+            self.assertIsNone(docs[0]["ccd"])
+            self.assertIsNotNone(docs[1]["ccd"]["toi"])
+        docs = self.check("play", "play", "--json", seq, lines=True)
+        self.assertNotIn("ccd", docs[0])
+        doc = self.check("generate", "generate", "sequence", "--json", "--frames", "3", "--dir",
+                         os.path.join(self.tmp, "breaking"), "--quiet")
+        self.assertEqual(doc["frame_count"], 3)
+
     def test_ccd(self):
         doc = self.check("ccd", "ccd", "--json", self.t0, self.t1)
         self.assertIsNotNone(doc["earliest"])
@@ -291,7 +310,8 @@ class JsonOutput(unittest.TestCase):
         self.assertEqual([m["name"] for m in doc["models"]], ["plant"])
 
 
-TIME_KEYS = {"seconds", "round_trip_ms", "latency_ms", "triangles_per_second", "bytes_per_second",
+TIME_KEYS = {"seconds", "round_trip_ms", "latency_ms", "late_ms", "triangles_per_second",
+             "bytes_per_second",
              "verify_seconds", "plan_seconds", "worst_seconds", "cache", "stats", "replaced_generation",
              "generation", "store", "member"}
 

@@ -12,7 +12,7 @@
 #   that do not crash are not, so the working corpus is replayed under ASan afterwards (run.sh
 #   does; docs/reliability.md has the measured rates).
 
-FUZZ_TARGETS=(ccd_queries mesh mesh_obj request frames)
+FUZZ_TARGETS=(ccd_queries mesh mesh_obj md2 request frames)
 FUZZ_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 FUZZ_FLAVOR="${FUZZ_FLAVOR:-asan}"
 case "$FUZZ_FLAVOR" in

@@ -271,6 +271,31 @@ def mesh_obj_seeds():
     yield "obj-negative-indices", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1 1\nf -4 -3 -2\nf -4 -2 -1\n"
 
 
+def md2(frames=2, vertices=4):
+    """A tetrahedron (plus unused vertices up to `vertices`) with `frames` keyframes."""
+    tris = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    frame_size = 40 + 4 * vertices
+    ofs_tris = 68
+    ofs_frames = ofs_tris + 12 * len(tris)
+    ofs_end = ofs_frames + frames * frame_size
+    out = b"IDP2" + struct.pack("<16i", 8, 64, 64, frame_size, 0, vertices, 0, len(tris), 0,
+                                 frames, 68, 68, ofs_tris, ofs_frames, ofs_end, ofs_end)
+    for t in tris:
+        out += struct.pack("<6H", *t, 0, 0, 0)
+    for k in range(frames):
+        out += struct.pack("<6f", 0.5 + k, 0.5, 0.25, float(k), 0.0, -1.0)
+        out += ("pose%d" % k).encode().ljust(16, b"\0")
+        for v in range(vertices):
+            out += struct.pack("<4B", (v * 37) % 256, (v * 11) % 256, (v * 5) % 256, 0)
+    return out
+
+
+def md2_seeds():
+    yield "md2", md2()
+    yield "md2-one-frame", md2(frames=1, vertices=6)
+    yield "md2-truncated", md2(frames=3)[:-7]
+
+
 def ccd_seeds():
     rows_vf = ["0,1,0,1,1,1", "0,1,0,1,0,1", "1,1,0,1,0,1", "0,1,1,1,0,1",
                "0,1,0,1,-1,1", "0,1,0,1,0,1", "1,1,0,1,0,1", "0,1,1,1,0,1"]
@@ -291,7 +316,8 @@ def main():
     frame_seeds = [(name, data[1:]) for name, data in request_seeds() if name.startswith("frame")]
     for target, seeds in (("request", request_seeds()), ("frames", frame_seeds),
                           ("mesh", mesh_seeds()),
-                          ("mesh_obj", mesh_obj_seeds()), ("ccd_queries", ccd_seeds())):
+                          ("mesh_obj", mesh_obj_seeds()), ("md2", md2_seeds()),
+                          ("ccd_queries", ccd_seeds())):
         os.makedirs(os.path.join(out, target), exist_ok=True)
         for name, data in seeds:
             with open(os.path.join(out, target, "seed-" + name), "wb") as f:

@@ -8,7 +8,7 @@
 # so totals over many runs are sums of column 4 (`bash tests/fuzz/run.sh --totals`). Crashers land
 # in build/fuzz/artifacts/; keep each one in tests/fuzz/regressions/TARGET/ once it is fixed.
 #
-#   bash tests/fuzz/run.sh TARGET SECONDS [JOBS]   # TARGET: ccd_queries, mesh, mesh_obj, request or frames
+#   bash tests/fuzz/run.sh TARGET SECONDS [JOBS]   # TARGET: ccd_queries, mesh, mesh_obj, md2, request or frames
 #   FUZZ_FLAVOR=fast bash tests/fuzz/run.sh ...    # without ASan, in build/fuzz-fast (common.sh);
 #                                                  # its working corpus is replayed under ASan after
 #   bash tests/fuzz/run.sh --totals                # executions per target, summed over runs
