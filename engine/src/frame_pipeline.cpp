@@ -174,7 +174,11 @@ StatusOr<FrameOutcome> run_frame(ProximityEngine& engine, FrameRequest request,
         }
     }
 
-    auto result = engine.query(request.queries, cancel);
+    // Penetration implies collisions (its pairs are returned too), here as on the wire, so an
+    // in-process frame answers exactly what the daemon answers.
+    QueryRequest queries = request.queries;
+    queries.collisions = queries.collisions || request.penetration;
+    auto result = engine.query(queries, cancel);
     if (!result.ok()) {
         return result.status();
     }

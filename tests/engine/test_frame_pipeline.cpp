@@ -176,6 +176,32 @@ TEST(FramePipeline, BeforeApplyRefusalChangesNothing) {
     EXPECT_TRUE(snapshot(engine.scene()) == before);
 }
 
+// Penetration implies collisions in-process as on the wire (proto/wire's decode_frame): a frame
+// asking only for penetration gets the collisions and their penetration vectors.
+TEST(FramePipeline, PenetrationAloneImpliesCollisions) {
+    ProximityEngine with_flag;
+    ProximityEngine both;
+    const auto ids = fill(with_flag);
+    fill(both);
+    auto frame_for = [&](ProximityEngine& engine, bool collisions) {
+        FrameRequest frame;
+        frame.update.positions.push_back(
+            {ids[1], shifted(engine.scene()[1].vertices, {-0.75, 0.1, 0})});
+        frame.queries.separation = false;
+        frame.queries.collisions = collisions;
+        frame.penetration = true;
+        return frame;
+    };
+    auto alone = run_frame(with_flag, frame_for(with_flag, false), nullptr);
+    auto asked = run_frame(both, frame_for(both, true), nullptr);
+    ASSERT_TRUE(alone.ok()) << alone.status().to_string();
+    ASSERT_TRUE(asked.ok()) << asked.status().to_string();
+    ASSERT_FALSE(asked->result.collisions.empty());
+    EXPECT_EQ(alone->result.collisions.size(), asked->result.collisions.size());
+    ASSERT_FALSE(asked->penetrations.empty());
+    EXPECT_EQ(alone->penetrations.size(), asked->penetrations.size());
+}
+
 // The same frame by hand: apply, query, penetration of the collisions, CCD from a copy.
 TEST(FramePipeline, OutcomeEqualsStepsByHandAndBruteForce) {
     ProximityEngine piped;
