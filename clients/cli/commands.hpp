@@ -30,6 +30,8 @@ void add_generate_command(CLI::App& app, int& exit_code);
 // proxima models, verify and review: massive models on a daemon or in a local store
 // (clients/cli/massive_command.cpp).
 void add_massive_commands(CLI::App& app, int& exit_code);
+// proxima load: the load-test harness (clients/cli/load_command.cpp).
+void add_load_command(CLI::App& app, int& exit_code);
 
 // Prints "proxima: error: CODE: message" on standard error and returns exit status 1
 // (clients/cli/cli_util.cpp). CODE is the gRPC name, also for codes the engine has no name for
