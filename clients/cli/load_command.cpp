@@ -1307,8 +1307,8 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     doc["measured_seconds"] = window;
     doc["warmup_count"] = all.size() - measured.size();
     doc["clients"] = {{"sim", clients.sim}, {"review", clients.review}, {"verify", clients.verify}};
-    doc["scenes"] = scene_names;
-    doc["queries"] = sh.queries.names;
+    doc["sim_scenes"] = scene_names;
+    doc["sim_queries"] = sh.queries.names;
     doc["tolerance"] = args.tolerance;
     doc["rate"] = args.rate;
     nlohmann::json model_names = nlohmann::json::array();
