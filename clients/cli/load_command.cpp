@@ -30,6 +30,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cctype>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -38,6 +39,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -81,6 +83,7 @@ struct LoadArgs {
     std::size_t episode_frames = 32;
     std::string model;
     std::size_t edit_every = 10;
+    std::vector<std::string> frame_dirs;
     std::vector<std::string> metrics;
     std::uint64_t max_calls = 1000000;
     std::string plot;
@@ -138,9 +141,10 @@ std::vector<std::string> split_list(const std::string& text) {
 
 struct ClientMix {
     std::size_t sim = 0;
+    std::size_t frames = 0;
     std::size_t review = 0;
     std::size_t verify = 0;
-    std::size_t total() const { return sim + review + verify; }
+    std::size_t total() const { return sim + frames + review + verify; }
 };
 
 // "sim=8,review=4": the clients of each kind; the message for a bad one.
@@ -164,12 +168,15 @@ std::variant<ClientMix, std::string> parse_clients(const std::string& text) {
         }
         if (kind == "sim") {
             mix.sim = count;
+        } else if (kind == "frames") {
+            mix.frames = count;
         } else if (kind == "review") {
             mix.review = count;
         } else if (kind == "verify") {
             mix.verify = count;
         } else {
-            return "--clients: unknown client kind '" + kind + "' (expected sim, review or verify)";
+            return "--clients: unknown client kind '" + kind +
+                   "' (expected sim, frames, review or verify)";
         }
     }
     if (mix.total() == 0) {
@@ -360,10 +367,20 @@ struct MetricsSample {
 
 // --- Recording ---------------------------------------------------------------------------------
 
-enum Kind : int { sim_scene, sim_frame, review_join, review_pose, review_edit, verify_model };
-constexpr int KIND_COUNT = 6;
-const std::array<const char*, KIND_COUNT> KIND_NAMES = {
-    "sim_scene", "sim_frame", "review_join", "review_pose", "review_edit", "verify_model"};
+enum Kind : int {
+    sim_scene,
+    sim_frame,
+    pair_scene,
+    pair_frame,
+    review_join,
+    review_pose,
+    review_edit,
+    verify_model
+};
+constexpr int KIND_COUNT = 8;
+const std::array<const char*, KIND_COUNT> KIND_NAMES = {"sim_scene",   "sim_frame",   "pair_scene",
+                                                        "pair_frame",  "review_join", "review_pose",
+                                                        "review_edit", "verify_model"};
 
 struct Call {
     double start = 0;          // seconds since the run began (when the call was due)
@@ -386,6 +403,10 @@ struct Shared {
     std::condition_variable cv;
     std::array<std::atomic<std::uint64_t>, KIND_COUNT> counts{};
     std::atomic<std::uint64_t> errors{0};
+    std::size_t running = 0;  // client threads not yet returned (guarded by mu)
+    // The streams in flight, cancelled when the run ends and they do not finish in time.
+    std::mutex cancel_mu;
+    std::map<const void*, std::function<void()>> cancels;
 
     // Sleeps until `t`; false when the run is stopping.
     bool sleep_until(Clock::time_point t) {
@@ -397,11 +418,33 @@ struct Shared {
     }
 };
 
+// While alive, the run's end may cancel the stream (TryCancel, safe from another thread).
+class CancelHook {
+  public:
+    CancelHook(Shared& shared, std::function<void()> cancel) : m_shared(shared) {
+        std::lock_guard lock(m_shared.cancel_mu);
+        m_shared.cancels[this] = std::move(cancel);
+    }
+    ~CancelHook() {
+        std::lock_guard lock(m_shared.cancel_mu);
+        m_shared.cancels.erase(this);
+    }
+    CancelHook(const CancelHook&) = delete;
+    CancelHook& operator=(const CancelHook&) = delete;
+
+  private:
+    Shared& m_shared;
+};
+
 class Recorder {
   public:
     explicit Recorder(Shared& shared) : m_shared(shared) {}
-    // Records a call due at `due` that ended now; false once the client has made its share.
+    // Records a call due at `due` that ended now; false once the client has made its share. A
+    // call the end of the run cancelled is not a figure.
     bool record(int kind, Clock::time_point due, const Status& status) {
+        if (m_shared.stop.load() && status.code() == StatusCode::cancelled) {
+            return false;
+        }
         const auto now = Clock::now();
         Call c;
         c.start = m_shared.since_start(due);
@@ -483,6 +526,7 @@ void run_sim(Shared& shared, Recorder& rec, const std::string& server, std::size
             continue;
         }
         auto& stream = *opened.value();
+        const CancelHook hook(shared, [&stream] { stream.cancel(); });
         Scene mirror;
         IdMap ids;
         bool broken = false;
@@ -527,6 +571,148 @@ void run_sim(Shared& shared, Recorder& rec, const std::string& server, std::size
             back_off(shared);
         } else {
             (void)stream.finish();
+        }
+    }
+}
+
+// --- Real frame pairs --------------------------------------------------------------------------
+
+struct LoadedPair {
+    std::string name;  // the directory
+    FramePair frames;
+};
+
+bool mesh_file(const std::filesystem::path& p) {
+    std::string name = p.filename().string();
+    if (name.size() > 3 && name.substr(name.size() - 3) == ".gz") {
+        name = name.substr(0, name.size() - 3);
+    }
+    const auto dot = name.rfind('.');
+    if (dot == std::string::npos) {
+        return false;
+    }
+    std::string ext = name.substr(dot + 1);
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+    return ext == "ply" || ext == "off" || ext == "obj" || ext == "stl" || ext == "gltf" ||
+           ext == "glb";
+}
+
+// The mesh files directly in `dir`, by name.
+std::vector<std::filesystem::path> meshes_in(const std::filesystem::path& dir) {
+    std::vector<std::filesystem::path> out;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+        if (e.is_regular_file() && mesh_file(e.path())) {
+            out.push_back(e.path());
+        }
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+// --frames DIR: a directory with two mesh files (t0 and t1, in name order), or one whose
+// subdirectories are such pairs (../shared/data/frames). Each file is one scene, split into its
+// connected components.
+StatusOr<std::vector<LoadedPair>> load_pairs(const std::vector<std::string>& dirs) {
+    std::vector<LoadedPair> out;
+    for (const auto& d : dirs) {
+        std::error_code ec;
+        if (!std::filesystem::is_directory(d, ec)) {
+            return not_found("--frames " + d + ": not a directory");
+        }
+        std::vector<std::filesystem::path> pair_dirs;
+        if (meshes_in(d).size() == 2) {
+            pair_dirs.emplace_back(d);
+        } else {
+            for (const auto& e : std::filesystem::directory_iterator(d, ec)) {
+                if (e.is_directory() && meshes_in(e.path()).size() == 2) {
+                    pair_dirs.push_back(e.path());
+                }
+            }
+            std::sort(pair_dirs.begin(), pair_dirs.end());
+        }
+        if (pair_dirs.empty()) {
+            return invalid_argument("--frames " + d +
+                                    ": neither two mesh files (t0, t1) nor subdirectories "
+                                    "holding two each");
+        }
+        for (const auto& p : pair_dirs) {
+            const auto files = meshes_in(p);
+            auto frames = load_frame_pair(files[0].string(), files[1].string(), true);
+            if (!frames.ok()) {
+                return frames.status();
+            }
+            out.push_back({p.string(), std::move(frames).value()});
+        }
+    }
+    return out;
+}
+
+// One scene of a real frame pair (CreateScene with the t0 objects: pair_scene), then frames over
+// one stream moving every vertex to t1, back to t0, and so on (pair_frame), with the --queries.
+void run_pair(Shared& shared, Recorder& rec, const std::string& server, const LoadedPair& pair) {
+    auto c = connect_client(shared, server);
+    while (!c.ok() && rec.running()) {
+        rec.record(pair_scene, Clock::now(), c.status());
+        back_off(shared);
+        c = connect_client(shared, server);
+    }
+    if (!c.ok()) {
+        return;
+    }
+    std::vector<NamedMesh> meshes;
+    for (const auto& o : pair.frames.objects) {
+        meshes.push_back(o.mesh);
+    }
+    Pacer pacer(shared, shared.args->rate);
+    while (rec.running()) {
+        const auto created_at = Clock::now();
+        auto scene = c.value()->create_scene("proxima load", meshes);
+        rec.record(pair_scene, created_at, scene.status());
+        if (!scene.ok()) {
+            back_off(shared);
+            continue;
+        }
+        auto opened = c.value()->open_stream(scene->scene_id);
+        Status status = opened.status();
+        std::optional<CancelHook> hook;
+        if (opened.ok()) {
+            client::FrameStream* stream = opened.value().get();
+            hook.emplace(shared, [stream] { stream->cancel(); });
+        }
+        for (std::uint64_t k = 1; status.ok() && rec.running(); ++k) {
+            client::FrameRequest frame;
+            frame.frame = k;
+            frame.queries = shared.queries.request;
+            frame.ccd = shared.queries.ccd;
+            for (std::size_t i = 0; i < meshes.size(); ++i) {
+                frame.update.positions.push_back(
+                    {scene->objects[i].id,
+                     k % 2 == 1 ? pair.frames.positions_t1[i] : meshes[i].mesh.vertices});
+            }
+            const auto due = pacer.next();
+            if (!due) {
+                break;
+            }
+            status = opened.value()->send(frame);
+            if (status.ok()) {
+                status = opened.value()->receive().status();
+            }
+            rec.record(pair_frame, *due, status);
+        }
+        if (opened.ok()) {
+            if (status.ok()) {
+                (void)opened.value()->finish();
+            } else {
+                opened.value()->cancel();
+            }
+        } else {
+            rec.record(pair_frame, Clock::now(), status);
+        }
+        (void)c.value()->delete_scene(scene->scene_id);
+        if (!status.ok()) {
+            back_off(shared);
         }
     }
 }
@@ -599,6 +785,7 @@ void run_review(Shared& shared, Recorder& rec, const std::string& server, const 
             continue;
         }
         auto& review = *session.value();
+        const CancelHook hook(shared, [&review] { review.cancel(); });
         std::uint64_t sequence = 0;
         Status status;
         while (status.ok() && rec.running()) {
@@ -882,7 +1069,7 @@ std::string ms_text(const nlohmann::json& ns) {
 
 std::string clients_text(const nlohmann::json& doc) {
     std::string out;
-    for (const char* kind : {"sim", "review", "verify"}) {
+    for (const char* kind : {"sim", "frames", "review", "verify"}) {
         if (doc["clients"].value(kind, 0) > 0) {
             out += (out.empty() ? "" : ",") + std::string(kind) + "=" +
                    std::to_string(doc["clients"][kind].get<int>());
@@ -1139,6 +1326,19 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
         }
         targets.push_back(std::get<MetricsTarget>(t));
     }
+    if (clients.frames > 0 && args.frame_dirs.empty()) {
+        return usage_error(command,
+                           "frames clients need --frames DIR (two frames of a simulation, e.g. "
+                           "../shared/data/frames/cloth-ball)");
+    }
+    std::vector<LoadedPair> pairs;
+    if (clients.frames > 0) {
+        auto loaded = load_pairs(args.frame_dirs);
+        if (!loaded.ok()) {
+            return fail(loaded.status());
+        }
+        pairs = std::move(loaded).value();
+    }
     std::string gnuplot;
     if (!args.plot.empty()) {
         gnuplot = find_gnuplot();
@@ -1216,11 +1416,27 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
         recorders.push_back(std::make_unique<Recorder>(sh));
         Recorder* rec = recorders.back().get();
         const std::size_t server = next++ % args.servers.size();
-        threads.emplace_back([body, rec, server] { body(*rec, server); });
+        {
+            std::lock_guard lock(sh.mu);
+            ++sh.running;
+        }
+        threads.emplace_back([body, rec, server, &sh] {
+            body(*rec, server);
+            {
+                std::lock_guard lock(sh.mu);
+                --sh.running;
+            }
+            sh.cv.notify_all();
+        });
     };
     for (std::size_t i = 0; i < clients.sim; ++i) {
         spawn([&sh, &args, i](Recorder& rec, std::size_t server) {
             run_sim(sh, rec, args.servers[server], i);
+        });
+    }
+    for (std::size_t i = 0; i < clients.frames; ++i) {
+        spawn([&sh, &args, &pairs, i](Recorder& rec, std::size_t server) {
+            run_pair(sh, rec, args.servers[server], pairs[i % pairs.size()]);
         });
     }
     for (std::size_t i = 0; i < clients.review; ++i) {
@@ -1271,6 +1487,17 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
         sh.stop = true;
     }
     sh.cv.notify_all();
+    // Calls in flight get a moment to finish (and count); then their streams are cancelled.
+    {
+        std::unique_lock lock(sh.mu);
+        sh.cv.wait_for(lock, std::chrono::seconds(2), [&sh] { return sh.running == 0; });
+    }
+    {
+        std::lock_guard lock(sh.cancel_mu);
+        for (const auto& [hook, cancel] : sh.cancels) {
+            cancel();
+        }
+    }
     for (auto& t : threads) {
         t.join();
     }
@@ -1306,7 +1533,15 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     doc["warmup_seconds"] = *warmup;
     doc["measured_seconds"] = window;
     doc["warmup_count"] = all.size() - measured.size();
-    doc["clients"] = {{"sim", clients.sim}, {"review", clients.review}, {"verify", clients.verify}};
+    doc["clients"] = {{"sim", clients.sim},
+                      {"frames", clients.frames},
+                      {"review", clients.review},
+                      {"verify", clients.verify}};
+    nlohmann::json pair_names = nlohmann::json::array();
+    for (const auto& p : pairs) {
+        pair_names.push_back(p.name);
+    }
+    doc["frame_pairs"] = pair_names;
     doc["sim_scenes"] = scene_names;
     doc["sim_queries"] = sh.queries.names;
     doc["tolerance"] = args.tolerance;
@@ -1364,7 +1599,8 @@ void add_load_command(CLI::App& app, int& exit_code) {
         ->check(duration_text(true))
         ->capture_default_str();
     load->add_option("--clients", args->clients,
-                     "Clients of each kind: sim=N,review=N,verify=N (at most 256 in all)")
+                     "Clients of each kind: sim=N,frames=N,review=N,verify=N (at most 256 in "
+                     "all)")
         ->capture_default_str();
     load->add_option("--scene", args->scenes,
                      "Sim clients' seed scenes, one per client in turn: all, or skirt, "
@@ -1387,6 +1623,10 @@ void add_load_command(CLI::App& app, int& exit_code) {
                      "Frames per sim stream before it starts over on a new scene")
         ->check(whole_number(2, 100000))
         ->capture_default_str();
+    load->add_option("--frames", args->frame_dirs,
+                     "Frames clients' real frame pairs: a directory with two mesh files (t0, t1), "
+                     "or one of such directories (../shared/data/frames); repeatable")
+        ->type_name("DIR");
     load->add_option("--model", args->model,
                      "Review and verify clients' model (default: the first one served)");
     load->add_option("--edit-every", args->edit_every,

@@ -6,7 +6,8 @@ ghz histogram and status codes summing to the count, metric samples with RSS and
 per-second timeline, the text summary and the PNG plot (when gnuplot is installed); and usage
 errors (an unknown client kind, a metrics host that is neither loopback nor a --server) exit 2
 with one line. The CI version of the issue's load run: a few seconds, not 30.
-Usage: test_load_cli.py PROXIMA PROXIMAD."""
+A frames client streams a real frame pair of DATA_DIR/frames when the folder is there.
+Usage: test_load_cli.py PROXIMA PROXIMAD [DATA_DIR]."""
 import json
 import os
 import re
@@ -19,6 +20,7 @@ import threading
 import unittest
 
 PROXIMA, PROXIMAD = sys.argv[1], sys.argv[2]
+DATA = sys.argv[3] if len(sys.argv) > 3 else ""
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
 from cli_helpers import run_program as run  # noqa: E402
@@ -121,7 +123,7 @@ class LoadCli(unittest.TestCase):
     def test_report(self):
         doc = self.report()
         self.assertEqual(doc["servers"], [self.address])
-        self.assertEqual(doc["clients"], {"sim": 2, "review": 2, "verify": 0})
+        self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 0})
         self.assertEqual(doc["models"], ["plant"])
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
         for name, k in doc["kinds"].items():
@@ -192,6 +194,7 @@ class LoadCli(unittest.TestCase):
             (["--queries", "separation,telepathy"], "unknown query 'telepathy'"),
             (["--scene", "moon"], "unknown scene 'moon'"),
             (["--metrics", "10.1.2.3:9464"], "loopback"),
+            (["--clients", "frames=1"], "frames clients need --frames DIR"),
         ]
         for extra, message in cases:
             p = run(PROXIMA, "load", "--server", self.address, *extra)
@@ -199,6 +202,20 @@ class LoadCli(unittest.TestCase):
             self.assertEqual(p.stdout, "")
             self.assertIn(message, p.stderr, extra)
             self.assertIn("proxima load --help", p.stderr)
+
+    def test_real_frame_pair(self):
+        pair = os.path.join(DATA, "frames", "n-body-simulation")
+        if not os.path.isdir(pair):
+            self.skipTest(f"no real frames at {pair} (../shared/data/frames)")
+        p = run(PROXIMA, "load", "--server", self.address, "--duration", "3s", "--warmup", "0",
+                "--clients", "frames=1", "--frames", pair, "--queries", "separation",
+                "--json", "--quiet", timeout=60)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        doc = json.loads(p.stdout)
+        self.assertEqual(doc["frame_pairs"], [pair])
+        self.assertEqual(set(doc["kinds"]), {"pair_scene", "pair_frame"})
+        self.assertEqual(doc["kinds"]["pair_scene"]["count"], 1)
+        self.check_ghz("pair_frame", doc["kinds"]["pair_frame"])
 
     def test_failed_preconditions(self):
         # A daemon that does not answer, and a model that is not served: exit 1 before any load.
