@@ -5,15 +5,17 @@
 // optionally a PNG plot drawn by gnuplot, and the daemons' Prometheus samples over the run.
 //
 //   proxima load --server ADDR [--server ADDR ...] [--duration 30s] [--warmup 2s]
-//                [--clients sim=N,review=N,verify=N] [--scene S[,S...]] [--queries Q[,Q...]]
-//                [--tolerance D] [--rate FPS] [--episode-frames N] [--model NAME]
-//                [--edit-every N] [--metrics URL ...] [--max-calls N] [--plot FILE.png]
-//                [--json | --out FILE] [--quiet]
+//                [--clients sim=N,frames=N,review=N,verify=N] [--scene S[,S...]]
+//                [--queries Q[,Q...]] [--tolerance D] [--rate FPS] [--episode-frames N]
+//                [--frames DIR ...] [--model NAME] [--edit-every N] [--metrics URL ...]
+//                [--max-calls N] [--plot FILE.png] [--json | --out FILE] [--quiet]
 //
-// Client kinds (docs/api.md, "proxima load"):
+// Client kinds (docs/load.md):
 //   sim     streams a built-in seed scene over StreamFrames in episodes of --episode-frames
 //           frames (the first frame creates the stream-owned scene: call kind sim_scene; the
 //           others move vertices, or change topology: sim_frame), asking the --queries.
+//   frames  a real frame pair (--frames DIR, e.g. ../shared/data/frames): CreateScene with t0
+//           (pair_scene), then frames moving every vertex to t1, back to t0, ... (pair_frame).
 //   review  joins a review room on a served massive model with a box avatar and walks it along a
 //           generated loop through the model (review_join, review_pose); with --edit-every N,
 //           every other reviewer moves an object every N-th step (review_edit: until the room's
