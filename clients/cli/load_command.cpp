@@ -464,6 +464,7 @@ class Recorder {
         return calls.size() < m_shared.per_client_cap;
     }
     bool running() const { return !m_shared.stop.load() && calls.size() < m_shared.per_client_cap; }
+    // The client's calls: its own thread's until the thread is joined.
     std::vector<Call> calls;
 
   private:
@@ -1458,10 +1459,11 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     std::array<std::uint64_t, KIND_COUNT> before{};
     for (int second = 1;; ++second) {
         const auto tick = std::min(sh.end, sh.start + std::chrono::seconds(second));
-        std::this_thread::sleep_until(tick);
-        bool all_done = true;
-        for (const auto& r : recorders) {
-            all_done = all_done && r->calls.size() >= sh.per_client_cap;
+        bool all_done = false;
+        {
+            // Clients return once they made their share of the calls (--max-calls).
+            std::unique_lock lock(sh.mu);
+            all_done = sh.cv.wait_until(lock, tick, [&sh] { return sh.running == 0; });
         }
         if (!args.quiet) {
             std::string line = "load " + std::to_string(second) + "/" +

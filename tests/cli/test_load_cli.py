@@ -173,14 +173,27 @@ class LoadCli(unittest.TestCase):
             self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
         self.assertGreater(os.path.getsize(self.png), 10000)
 
+    def test_max_calls(self):
+        # Bounded in count: 4 clients, 50 calls in all: 12 each, then the run ends by itself.
+        p = run(PROXIMA, "load", "--server", self.address, "--duration", "60s", "--warmup", "0",
+                "--clients", "sim=4", "--scene", "bowl", "--max-calls", "50", "--json", "--quiet",
+                timeout=60)
+        self.assertEqual(p.returncode, 0, p.stderr)
+        doc = json.loads(p.stdout)
+        self.assertEqual(doc["count"] + doc["warmup_count"], 48)
+        self.assertLess(doc["measured_seconds"], 30)
+
     def test_text_summary(self):
-        p = run(PROXIMA, "load", "--server", self.address, "--duration", "1500ms", "--warmup",
-                "500ms", "--clients", "sim=1", "--scene", "bowl", "--quiet", timeout=60)
+        # Two --server addresses (the same daemon twice): the clients are spread over both.
+        p = run(PROXIMA, "load", "--server", self.address, "--server", self.address, "--duration",
+                "1500ms", "--warmup", "500ms", "--clients", "sim=2", "--scene", "bowl", "--quiet",
+                timeout=60)
         self.assertEqual(p.returncode, 0, p.stderr)
         self.assertEqual(p.stderr, "")
         lines = p.stdout.splitlines()
         self.assertLessEqual(len(lines), 25, "one screen")
         self.assertTrue(lines[0].startswith("load: "), lines[0])
+        self.assertTrue(lines[0].endswith(f"against {self.address} {self.address}"), lines[0])
         self.assertTrue(any(x.startswith("sim_frame ") for x in lines), p.stdout)
         self.assertTrue(any(x.startswith("all ") for x in lines), p.stdout)
 
