@@ -39,6 +39,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -1290,6 +1291,15 @@ Status write_plot(const nlohmann::json& doc, const std::string& png, const std::
 
 // --- The run -----------------------------------------------------------------------------------
 
+std::string utc_now_text() {
+    const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+    std::tm utc{};
+    gmtime_r(&now, &utc);
+    std::array<char, 32> text{};
+    std::strftime(text.data(), text.size(), "%Y-%m-%dT%H:%M:%SZ", &utc);
+    return text.data();
+}
+
 int run_load(const CLI::App& command, const LoadArgs& args) {
     const auto duration = parse_duration(args.duration, false);
     const auto warmup = parse_duration(args.warmup, true);
@@ -1407,6 +1417,7 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     std::vector<std::thread> threads;
     std::vector<MetricsSample> samples;
     std::uint64_t scrape_failures = 0;
+    const std::string date = utc_now_text();
     shared->start = Clock::now();
     shared->end = shared->start + std::chrono::duration_cast<Clock::duration>(
                                       std::chrono::duration<double>(*duration));
@@ -1457,6 +1468,7 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     // A progress line once a second until the end (or every client reached its share of calls).
     const bool tty = isatty(fileno(stderr)) != 0;
     std::array<std::uint64_t, KIND_COUNT> before{};
+    bool ended_by_count = false;
     for (int second = 1;; ++second) {
         const auto tick = std::min(sh.end, sh.start + std::chrono::seconds(second));
         bool all_done = false;
@@ -1483,6 +1495,7 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
             std::fflush(stderr);
         }
         if (tick >= sh.end || all_done) {
+            ended_by_count = all_done;
             break;
         }
     }
@@ -1532,6 +1545,10 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
                 ghz_json(by_kind[static_cast<std::size_t>(k)], window);
         }
     }
+    // ghz's run description: when it began (RFC 3339, UTC) and why it ended ("timeout": the
+    // duration; "normal": every client made its share of --max-calls).
+    doc["date"] = date;
+    doc["endReason"] = ended_by_count ? "normal" : "timeout";
     doc["servers"] = args.servers;
     doc["duration_seconds"] = *duration;
     doc["warmup_seconds"] = *warmup;

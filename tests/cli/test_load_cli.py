@@ -123,6 +123,8 @@ class LoadCli(unittest.TestCase):
     def test_report(self):
         doc = self.report()
         self.assertEqual(doc["servers"], [self.address])
+        self.assertEqual(doc["endReason"], "timeout")
+        self.assertRegex(doc["date"], r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ$")
         self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 0})
         self.assertEqual(doc["models"], ["plant"])
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
@@ -181,6 +183,7 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(p.returncode, 0, p.stderr)
         doc = json.loads(p.stdout)
         self.assertEqual(doc["count"] + doc["warmup_count"], 48)
+        self.assertEqual(doc["endReason"], "normal")
         self.assertLess(doc["measured_seconds"], 30)
 
     def test_text_summary(self):
