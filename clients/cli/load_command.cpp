@@ -847,9 +847,14 @@ void run_verify(Shared& shared, Recorder& rec, const std::string& server, const 
     }
     while (c.ok() && rec.running()) {
         const auto start = Clock::now();
+        // A deadline at the end of the run's grace: a whole-model verification that sends no
+        // event for a while still ends with the run.
+        const auto deadline = std::chrono::duration_cast<std::chrono::milliseconds>(
+            shared.end - start + std::chrono::seconds(2));
         auto summary = c.value()->verify_model(
             model.name, shared.args->tolerance,
-            [&](const client::VerifyEvent&) { return !shared.stop.load(); });
+            [&](const client::VerifyEvent&) { return !shared.stop.load(); },
+            std::max(deadline, std::chrono::milliseconds(1)));
         if (!summary.ok() && shared.stop.load()) {
             break;  // cut short by the end of the run: not a figure
         }

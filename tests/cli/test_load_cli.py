@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """`proxima load` (issue #16 item 1) against a proximad it starts: a short run of simulator and
-review clients (one reviewer editing) on a small generated plant, with the daemon's Prometheus
+review clients (one reviewer editing) and a verify client on a small generated plant, with the daemon's Prometheus
 endpoint sampled. Checks the report: calls of every kind, no errors, percentiles in order, the
 ghz histogram and status codes summing to the count, metric samples with RSS and CPU, the
 per-second timeline, the text summary and the PNG plot (when gnuplot is installed); and usage
@@ -27,7 +27,7 @@ from cli_helpers import run_program as run  # noqa: E402
 
 # The kinds measured after the warm-up (the reviewers join during it: review_join is in the
 # timeline only).
-KINDS = {"sim_scene", "sim_frame", "review_pose", "review_edit"}
+KINDS = {"sim_scene", "sim_frame", "review_pose", "review_edit", "verify_model"}
 
 
 class LoadCli(unittest.TestCase):
@@ -65,11 +65,11 @@ class LoadCli(unittest.TestCase):
         cls.png = os.path.join(cls.tmp, "load.png")
         cls.have_gnuplot = shutil.which("gnuplot") is not None
         plot = ["--plot", cls.png] if cls.have_gnuplot else []
-        cls.load_run = run(PROXIMA, "load", "--server", cls.address, "--duration", "6s", "--warmup",
-                      "1s", "--clients", "sim=2,review=2", "--scene", "bowl,breaking",
-                      "--queries", "separation,collisions,ccd", "--edit-every", "3",
-                      "--metrics", f"http://{cls.metrics}/metrics", "--json", *plot,
-                      timeout=120)
+        cls.load_run = run(PROXIMA, "load", "--server", cls.address, "--duration", "6s",
+                           "--warmup", "1s", "--clients", "sim=2,review=2,verify=1", "--scene",
+                           "bowl,breaking", "--queries", "separation,collisions,ccd",
+                           "--edit-every", "3", "--metrics", f"http://{cls.metrics}/metrics",
+                           "--json", *plot, timeout=120)
 
     @classmethod
     def stop_daemon(cls):
@@ -125,7 +125,7 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(doc["servers"], [self.address])
         self.assertEqual(doc["endReason"], "timeout")
         self.assertRegex(doc["date"], r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ$")
-        self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 0})
+        self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 1})
         self.assertEqual(doc["models"], ["plant"])
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
         for name, k in doc["kinds"].items():
