@@ -21,8 +21,9 @@
 //           every other reviewer moves an object every N-th step (review_edit: until the room's
 //           edit_applied comes back).
 //   verify  static verification of the whole model (VerifyModel), one call after the other.
-// --rate FPS paces each sim and review client (open loop: a call's latency runs from the moment
-// it was due, so a slow daemon is not hidden by the client waiting for it); 0 is closed loop.
+// --rate FPS paces each sim, frames and review client (open loop: a call's latency runs from the
+// moment it was due, so a slow daemon is not hidden by the client waiting for it); 0 is closed
+// loop.
 
 #include <netdb.h>
 #include <sys/socket.h>
@@ -1610,8 +1611,9 @@ void add_load_command(CLI::App& app, int& exit_code) {
     auto args = std::make_shared<LoadArgs>();
     auto* load = app.add_subcommand(
         "load",
-        "Load-test proximad daemons with simulator, review and verify clients for a bounded "
-        "time; per call kind the figures of a ghz report (JSON), a text summary, a PNG plot");
+        "Load-test proximad daemons with simulator (seed scenes, real frame pairs), review and "
+        "verify clients for a bounded time; per call kind the figures of a ghz report (JSON), a "
+        "text summary, a PNG plot");
     auto* server = load->add_option("--server", args->servers,
                                     "A daemon's HOST:PORT (repeat for several; clients are "
                                     "spread over them)")
@@ -1640,9 +1642,10 @@ void add_load_command(CLI::App& app, int& exit_code) {
                      "The tolerance query's distance, and the review and verify tolerance")
         ->check(non_negative_number())
         ->capture_default_str();
-    load->add_option("--rate", args->rate,
-                     "Calls per second of each sim and review client (open loop); 0: as fast "
-                     "as answered (closed loop)")
+    load->add_option(
+            "--rate", args->rate,
+            "Calls per second of each sim, frames and review client (open loop); 0: as fast "
+            "as answered (closed loop)")
         ->check(non_negative_number())
         ->capture_default_str();
     load->add_option("--episode-frames", args->episode_frames,
@@ -1651,7 +1654,7 @@ void add_load_command(CLI::App& app, int& exit_code) {
         ->capture_default_str();
     load->add_option("--frames", args->frame_dirs,
                      "Frames clients' real frame pairs: a directory with two mesh files (t0, t1), "
-                     "or one of such directories (../shared/data/frames); repeatable")
+                     "or a directory of such directories (../shared/data/frames); repeatable")
         ->type_name("DIR");
     load->add_option("--model", args->model,
                      "Review and verify clients' model (default: the first one served)");
