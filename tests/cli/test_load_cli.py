@@ -223,7 +223,7 @@ class LoadCli(unittest.TestCase):
         pair = os.path.join(DATA, "frames", "n-body-simulation")
         if not os.path.isdir(pair):
             self.skipTest(f"no real frames at {pair} (../shared/data/frames)")
-        p = run(PROXIMA, "load", "--server", self.address, "--duration", "3s", "--warmup", "0",
+        p = run(PROXIMA, "load", "--server", self.address, "--duration", "4s", "--warmup", "0",
                 "--clients", "frames=1", "--frames", pair, "--queries", "separation",
                 "--json", "--quiet", timeout=60)
         self.assertEqual(p.returncode, 0, p.stderr)
