@@ -29,30 +29,40 @@ struct CcdArgs {
     std::string server;
     ServerFlags server_flags;
     bool split_components = false;
+    bool weld = false;
     double min_distance = 0.0;
     JsonOutput output;
     std::vector<std::string> files;
 };
 
+// `p` already in the files' numbering (client::in_file_numbering).
 nlohmann::json pair_json(const ccd::CcdPair& p) {
-    return {{"kind", ccd::ccd_kind_name(p.kind)},
-            {"object", p.object},
-            {"primitive", p.primitive},
-            {"other", p.other},
-            {"other_primitive", p.other_primitive},
-            {"toi", p.toi},
-            {"capped", p.capped}};
+    return {
+        {"kind", ccd::ccd_kind_name(p.kind)},
+        {"object", p.object},
+        {"primitive", p.primitive},
+        {"other", p.other},
+        {"other_primitive", p.other_primitive},
+        {"vertices", std::vector<std::uint32_t>(
+                         p.vertices.begin(), p.vertices.begin() + static_cast<std::ptrdiff_t>(
+                                                                      ccd::vertex_count(p.kind)))},
+        {"other_vertices", std::vector<std::uint32_t>(
+                               p.other_vertices.begin(),
+                               p.other_vertices.begin() +
+                                   static_cast<std::ptrdiff_t>(ccd::other_vertex_count(p.kind)))},
+        {"toi", p.toi},
+        {"capped", p.capped}};
 }
 
 }  // namespace
 
 StatusOr<FramePair> load_frame_pair(const std::string& t0_file, const std::string& t1_file,
-                                    bool split_components) {
-    auto t0 = client::load_objects({t0_file}, split_components);
+                                    bool split_components, WeldMode weld) {
+    auto t0 = client::load_objects({t0_file}, split_components, weld);
     if (!t0.ok()) {
         return t0.status();
     }
-    auto t1 = client::load_objects({t1_file}, split_components);
+    auto t1 = client::load_objects({t1_file}, split_components, weld);
     if (!t1.ok()) {
         return t1.status();
     }
@@ -88,12 +98,19 @@ StatusOr<FramePair> load_frame_pair(const std::string& t0_file, const std::strin
 
 namespace {
 
-// Prints a CCD result, local or from a daemon. Indices are those of the objects as loaded:
-// objects in file order (or by connected component with --split-components); a vf primitive is a
-// vertex and other_primitive a triangle of the objects' meshes; ee primitives are edge indices
-// (the sorted unique vertex pairs of an object's triangles).
-int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd::CcdResult& r,
+// Prints a CCD result, local or from a daemon. Objects are indices of the objects as loaded
+// (files in order, or their connected components with --split-components); every other id is the
+// file's own: a vf primitive is a file vertex id and other_primitive a file triangle id; ee
+// primitives are file edge indices (positions in the sorted list of the file's unique edges, as
+// vertex id pairs); `vertices` / `other_vertices` are file vertex ids.
+int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd::CcdResult& result,
                      const JsonOutput& output) {
+    // The same result with every id in the files' numbering.
+    ccd::CcdResult r = result;
+    const auto file_edges = client::file_edge_ids(objects);
+    for (auto& p : r.pairs) {
+        p = client::in_file_numbering(objects, file_edges, p);
+    }
     const auto& st = r.stats;
     if (output.wanted()) {
         nlohmann::json doc;
@@ -206,7 +223,8 @@ StatusOr<ccd::CcdResult> ccd_remote(const CcdArgs& args, const FramePair& frames
 }
 
 int run_ccd(const CcdArgs& args) {
-    auto frames = load_frame_pair(args.files[0], args.files[1], args.split_components);
+    auto frames =
+        load_frame_pair(args.files[0], args.files[1], args.split_components, weld_mode(args.weld));
     if (!frames.ok()) {
         return fail(frames.status());
     }
@@ -236,6 +254,9 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
     add_server_flags(*cmd, args->server_flags, server_opt);
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
+    cmd->add_flag("--weld", args->weld,
+                  "Merge vertices at identical positions in every file (by default only in "
+                  "triangle soups, files whose triangles share no vertex)");
     cmd->add_option("--min-distance", args->min_distance,
                     "Report contact when primitives come within this distance")
         ->check(non_negative_number())

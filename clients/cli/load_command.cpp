@@ -644,7 +644,8 @@ StatusOr<std::vector<LoadedPair>> load_pairs(const std::vector<std::string>& dir
         }
         for (const auto& p : pair_dirs) {
             const auto files = meshes_in(p);
-            auto frames = load_frame_pair(files[0].string(), files[1].string(), true);
+            auto frames = load_frame_pair(files[0].string(), files[1].string(), true,
+                                          WeldMode::triangle_soups);
             if (!frames.ok()) {
                 return frames.status();
             }

@@ -51,6 +51,7 @@ struct DistanceArgs {
     cli::ServerFlags server_flags;
     std::size_t inline_mesh_bytes = 1u << 20;
     bool split_components = false;
+    bool weld = false;
     bool self = false;
     bool collisions = false;
     bool pns = false;
@@ -240,7 +241,8 @@ int run_distance(const DistanceArgs& args) {
     if (!culler.ok()) {
         return fail(culler.status());
     }
-    auto objects = client::load_objects(args.files, args.split_components);
+    auto objects =
+        client::load_objects(args.files, args.split_components, cli::weld_mode(args.weld));
     if (!objects.ok()) {
         return fail(objects.status());
     }
@@ -633,6 +635,9 @@ int main(int argc, char** argv) {
             ->needs(server_opt);
         distance->add_flag("--split-components", dist.split_components,
                            "Make each connected component of a file an object");
+        distance->add_flag("--weld", dist.weld,
+                           "Merge vertices at identical positions in every file (by default "
+                           "only in triangle soups, files whose triangles share no vertex)");
         distance->add_flag("--self", dist.self,
                            "Also: for every triangle, its closest non-adjacent triangle");
         distance->add_flag("--collisions", dist.collisions,

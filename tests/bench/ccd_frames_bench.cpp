@@ -94,7 +94,7 @@ int usage(const char* argv0, int code) {
 StatusOr<std::pair<Scene, std::vector<std::vector<Vec3>>>> load(const std::string& dir,
                                                                 const FramePair& fp) {
     MeshReadOptions raw;
-    raw.weld_identical_positions = false;
+    raw.weld = WeldMode::never;
     auto m0 = read_mesh(dir + "/frames/" + fp.t0, raw);
     if (!m0.ok()) {
         return m0.status();

@@ -290,7 +290,7 @@ bool run_real(const std::string& dir_name, const Options& opt, Runner& runner,
         return false;
     }
     MeshReadOptions raw;
-    raw.weld_identical_positions = false;
+    raw.weld = WeldMode::never;
     auto m0 = read_mesh(files[0], raw);
     auto m1 = read_mesh(files[1], raw);
     if (!m0.ok() || !m1.ok() || m0->triangles != m1->triangles) {

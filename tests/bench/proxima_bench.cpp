@@ -576,7 +576,7 @@ struct FramePair {
 // t1 positions are taken through t0's component split, so objects correspond exactly.
 StatusOr<FramePair> load_pair(const std::string& a, const std::string& b) {
     MeshReadOptions raw;
-    raw.weld_identical_positions = false;
+    raw.weld = WeldMode::never;
     auto m0 = read_mesh(a, raw);
     if (!m0.ok()) {
         return m0.status();

@@ -61,7 +61,7 @@ class CcdCli(unittest.TestCase):
         for key in ("objects", "pairs", "object_pairs", "earliest", "stats"):
             self.assertIn(key, doc)
         for p in doc["pairs"]:
-            for key in ("kind", "object", "primitive", "other", "other_primitive", "toi"):
+            for key in ("kind", "object", "primitive", "other", "other_primitive", "vertices", "other_vertices", "toi"):
                 self.assertIn(key, p)
             self.assertIn(p["kind"], ("vf", "ee"))
             self.assertTrue(0.0 <= p["toi"] <= 1.0)
@@ -90,10 +90,11 @@ class CcdCli(unittest.TestCase):
         self.assertGreaterEqual(len(doc["pairs"]), 3)
         e = doc["earliest"]
         self.assertTrue(0.5 - TOL <= e["toi"] <= 0.5, e)
-        # Each of the three falling vertices (object 1) meets the plane (object 0).
+        # Each of the three falling vertices (object 1: file vertices 4, 5, 6 after the plane's
+        # four; ids are the file's, also with --split-components) meets the plane (object 0).
         hit = {p["primitive"] for p in doc["pairs"]
                if p["kind"] == "vf" and p["object"] == 1 and p["other"] == 0}
-        self.assertEqual(hit, {0, 1, 2})
+        self.assertEqual(hit, {4, 5, 6})
         self.assertEqual([(o["object"], o["other"]) for o in doc["object_pairs"]], [(0, 1)])
 
     def test_one_object_self_contacts(self):
@@ -110,8 +111,11 @@ class CcdCli(unittest.TestCase):
         self.assertEqual(len(doc["pairs"]), 1, doc["pairs"])
         p = doc["pairs"][0]
         self.assertEqual((p["kind"], p["object"], p["other"]), ("ee", 0, 1))
-        # Edge 0 of each triangle is (0, 1): its sorted unique vertex pairs are (0,1), (0,2), (1,2).
-        self.assertEqual((p["primitive"], p["other_primitive"]), (0, 0))
+        # Edge indices are the file's: its sorted unique vertex pairs are (0,1), (0,2), (1,2) of
+        # the hanging triangle, then (3,4), (3,5), (4,5) of the standing one; its bottom edge is
+        # (3, 4), file edge 3. The pair names both edges' vertices.
+        self.assertEqual((p["primitive"], p["other_primitive"]), (0, 3))
+        self.assertEqual((p["vertices"], p["other_vertices"]), ([0, 1], [3, 4]))
         self.assertTrue(0.5 - TOL <= p["toi"] <= 0.5)
 
     def test_min_distance(self):

@@ -39,10 +39,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::string_view format = FORMATS[data[0] % FORMATS.size()];
     const std::string_view bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
     proxima::MeshReadOptions options;
-    // Welding on every other input: both paths must hold their promises.
-    options.weld_identical_positions = (data[0] / FORMATS.size()) % 2 == 0;
+    // The three weld modes in turn: every path must hold its promises.
+    constexpr std::array<proxima::WeldMode, 3> WELDS = {
+        proxima::WeldMode::triangle_soups, proxima::WeldMode::always, proxima::WeldMode::never};
+    options.weld = WELDS[(data[0] / FORMATS.size()) % WELDS.size()];
     options.max_uncompressed_bytes = std::uint64_t{64} << 20;
-    const auto read = proxima::read_mesh_from_memory(bytes, format, "fuzz", options);
+    std::vector<std::uint32_t> file_vertex;
+    const auto read = proxima::read_mesh_from_memory(bytes, format, "fuzz", options, &file_vertex);
     if (!read.ok()) {
         check(read.status().message().find("fuzz") != std::string::npos, "errors name the file");
         return 0;
@@ -57,6 +60,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         for (const auto i : t) {
             check(i < mesh.vertices.size(), "indices in range");
         }
+    }
+    check(file_vertex.size() == mesh.vertices.size(), "every vertex has its file id");
+    for (std::size_t k = 1; k < file_vertex.size(); ++k) {
+        check(file_vertex[k - 1] < file_vertex[k], "file ids in file order, each once");
     }
     return 0;
 }

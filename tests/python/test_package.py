@@ -194,6 +194,18 @@ def test_ccd(client: proxima.Client) -> None:
         assert earliest is not None and 1 / 3 - 1e-5 < earliest.toi <= 1 / 3
         assert r.ccd_pairs.shape == (len(r.ccd.pairs), 5) and len(r.ccd.object_pairs) == 1
         assert r.ccd_toi.min() == earliest.toi
+        # Every pair names its primitives' vertices in the uploaded buffers' numbering.
+        meshes = [A, small]
+        assert r.ccd_vertices.shape == (len(r.ccd.pairs), 2, 3)
+        kinds = set()
+        for (kind, _, prim, other, other_prim), (mine, theirs) in zip(r.ccd_pairs, r.ccd_vertices):
+            kinds.add(int(kind))
+            if kind == proxima.pb.CCD_VERTEX_FACE:
+                assert list(mine) == [prim, -1, -1]
+                assert list(theirs) == list(meshes[other].triangles[other_prim])
+            else:
+                assert mine[0] < mine[1] and theirs[0] < theirs[1] and mine[2] == theirs[2] == -1
+        assert kinds == {0, 1}
         # Back where it started, but with a minimum distance of 0.1 in a short move: no contact.
         r = client.query(scene.scene_id, frame=2, separation=False, ccd=True,
                          ccd_min_distance=0.1, positions={scene.objects[1].id: small.vertices})

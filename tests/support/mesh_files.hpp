@@ -30,7 +30,7 @@ inline std::string read_bytes(const std::string& path) {
 
 inline MeshReadOptions no_weld() {
     MeshReadOptions options;
-    options.weld_identical_positions = false;
+    options.weld = WeldMode::never;
     return options;
 }
 

@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
         ++files;
         const std::string path = entry.path().string();
         proxima::MeshReadOptions no_weld;
-        no_weld.weld_identical_positions = false;
+        no_weld.weld = proxima::WeldMode::never;
         const auto own = proxima::read_mesh(path, no_weld);
         Assimp::Importer importer;
         const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate);

@@ -142,6 +142,8 @@ void expect_same(const ccd::CcdResult& a, const ccd::CcdResult& b) {
         EXPECT_EQ(std::tie(x.kind, x.object, x.primitive, x.other, x.other_primitive, x.capped),
                   std::tie(y.kind, y.object, y.primitive, y.other, y.other_primitive, y.capped));
         EXPECT_EQ(bits(x.toi), bits(y.toi));
+        EXPECT_EQ(x.vertices, y.vertices);
+        EXPECT_EQ(x.other_vertices, y.other_vertices);
     }
     ASSERT_EQ(a.object_pairs.size(), b.object_pairs.size());
     for (std::size_t i = 0; i < a.object_pairs.size(); ++i) {
@@ -589,7 +591,15 @@ TEST(Wire, MalformedResultsAreInternalErrorsOnTheClient) {
     r.mutable_ccd()->add_pairs()->set_object(2);
     expect_error(detail::decode_frame_response(r).status(), StatusCode::internal, {"CCD pair"});
     r = base();
-    r.mutable_ccd()->add_pairs();
+    r.mutable_ccd()->add_pairs()->add_vertices(0);  // a vf pair names 1 and 3 vertices
+    expect_error(detail::decode_frame_response(r).status(), StatusCode::internal,
+                 {"CCD pair 0", "vertices", "vf needs 1 and 3"});
+    r = base();
+    auto* vf = r.mutable_ccd()->add_pairs();
+    vf->add_vertices(0);
+    for (int k = 0; k < 3; ++k) {
+        vf->add_other_vertices(static_cast<std::uint32_t>(k));
+    }
     r.mutable_ccd()->set_has_earliest(true);
     r.mutable_ccd()->set_earliest(1);
     expect_error(detail::decode_frame_response(r).status(), StatusCode::internal, {"earliest"});

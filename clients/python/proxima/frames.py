@@ -172,9 +172,20 @@ class Result:
     @property
     def ccd_pairs(self) -> np.ndarray:
         """(K, 5) int64 rows (kind, object, primitive, other, other_primitive); kind is
-        CCD_VERTEX_FACE (0: vertex, triangle) or CCD_EDGE_EDGE (1: edges as vertex pairs)."""
+        CCD_VERTEX_FACE (0: a vertex id, a triangle id) or CCD_EDGE_EDGE (1: two edge indices,
+        positions in the object's sorted list of unique edges; ccd_vertices names their vertices)."""
         return np.array([(p.kind, p.object, p.primitive, p.other, p.other_primitive)
                          for p in self.raw.ccd.pairs], dtype=np.int64).reshape(-1, 5)
+
+    @property
+    def ccd_vertices(self) -> np.ndarray:
+        """(K, 2, 3) int64: for each CCD pair, [0] the primitive's vertex ids and [1] the other
+        primitive's, in your vertex buffers' numbering (vertex-face: [v, -1, -1] and the
+        triangle's three corners; edge-edge: each edge's two vertices, then -1)."""
+        def padded(ids: Any) -> list:
+            return list(ids) + [-1] * (3 - len(ids))
+        return np.array([(padded(p.vertices), padded(p.other_vertices))
+                         for p in self.raw.ccd.pairs], dtype=np.int64).reshape(-1, 2, 3)
 
     @property
     def ccd_toi(self) -> np.ndarray:

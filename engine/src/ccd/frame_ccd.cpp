@@ -757,6 +757,22 @@ void merge_results(tbb::enumerable_thread_specific<std::vector<CcdPair>>& hits, 
     }
 }
 
+// Each pair's vertex ids (CcdPair::vertices), from the objects' triangles and edge lists.
+void name_vertices(const std::vector<ObjectData>& objects, CcdResult& result) {
+    for (auto& p : result.pairs) {
+        const auto& a = objects[p.object];
+        const auto& b = objects[p.other];
+        if (p.kind == CcdKind::vertex_face) {
+            p.vertices = {p.primitive, 0, 0};
+            const auto& tri = b.object->topology->triangle(p.other_primitive);
+            p.other_vertices = {tri[0], tri[1], tri[2]};
+        } else {
+            p.vertices = {a.edges[p.primitive][0], a.edges[p.primitive][1], 0};
+            p.other_vertices = {b.edges[p.other_primitive][0], b.edges[p.other_primitive][1], 0};
+        }
+    }
+}
+
 }  // namespace
 
 std::vector<std::array<std::uint32_t, 2>> mesh_edges(const MeshTopology& topology) {
@@ -805,6 +821,7 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
 
     const auto merge_start = Clock::now();
     merge_results(runner.hits(), result);
+    name_vertices(objects, result);
     result.stats.narrow_phase_seconds += seconds_since(merge_start);
     result.stats.total_seconds = seconds_since(start);
     return result;

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <numeric>
 #include <set>
 #include <string_view>
 #include <system_error>
@@ -83,11 +84,13 @@ Status collect(const aiScene* scene, const aiNode* node, const aiMatrix4x4& pare
     return {};
 }
 
-// Merges vertices with identical coordinates, keeping the first occurrence's index order.
-void weld(TriangleMesh& mesh) {
+// Merges vertices with identical coordinates, keeping the first occurrence's index order;
+// `file_vertex[k]` becomes the input index of kept vertex k's first occurrence.
+void weld(TriangleMesh& mesh, std::vector<std::uint32_t>& file_vertex) {
     std::map<std::tuple<double, double, double>, std::uint32_t> seen;
     std::vector<std::uint32_t> remap(mesh.vertices.size());
     std::vector<Vec3> kept;
+    std::vector<std::uint32_t> first;
     kept.reserve(mesh.vertices.size());
     for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
         const auto& p = mesh.vertices[v];
@@ -96,6 +99,7 @@ void weld(TriangleMesh& mesh) {
         auto [it, inserted] = seen.emplace(key, static_cast<std::uint32_t>(kept.size()));
         if (inserted) {
             kept.push_back(p);
+            first.push_back(static_cast<std::uint32_t>(v));
         }
         remap[v] = it->second;
     }
@@ -105,6 +109,22 @@ void weld(TriangleMesh& mesh) {
         }
     }
     mesh.vertices = std::move(kept);
+    file_vertex = std::move(first);
+}
+
+// A triangle soup: no vertex is used by two triangle corners (STL, and exporters that write
+// every corner on its own).
+bool is_triangle_soup(const TriangleMesh& mesh) {
+    std::vector<bool> used(mesh.vertices.size(), false);
+    for (const auto& t : mesh.triangles) {
+        for (const auto v : t) {
+            if (used[v]) {
+                return false;
+            }
+            used[v] = true;
+        }
+    }
+    return true;
 }
 
 // The whole file, or an error naming it.
@@ -250,9 +270,11 @@ Status unsupported_format(const std::string& name, const std::string& format) {
                             "' (accepted: " + std::string(ACCEPTED_MESH_FORMATS) + ")");
 }
 
-// What read_mesh and read_mesh_from_memory do after reading: validate, then weld.
+// What read_mesh and read_mesh_from_memory do after reading: validate, then weld (options.weld),
+// keeping the map back to the file's vertex ids where asked.
 StatusOr<TriangleMesh> finish(StatusOr<TriangleMesh> read, const std::string& name,
-                              const MeshReadOptions& options) {
+                              const MeshReadOptions& options,
+                              std::vector<std::uint32_t>* file_vertex) {
     if (!read.ok()) {
         return read.status();
     }
@@ -261,15 +283,25 @@ StatusOr<TriangleMesh> finish(StatusOr<TriangleMesh> read, const std::string& na
     if (Status s = validate_mesh(mesh, "mesh file '" + name + "'"); !s.ok()) {
         return s;
     }
-    if (options.weld_identical_positions) {
-        weld(mesh);
+    const bool weld_it = options.weld == WeldMode::always ||
+                         (options.weld == WeldMode::triangle_soups && is_triangle_soup(mesh));
+    std::vector<std::uint32_t> ids;
+    if (weld_it) {
+        weld(mesh, ids);
+    } else if (file_vertex != nullptr) {
+        ids.resize(mesh.vertices.size());
+        std::iota(ids.begin(), ids.end(), 0u);
+    }
+    if (file_vertex != nullptr) {
+        *file_vertex = std::move(ids);
     }
     return mesh;
 }
 
 }  // namespace
 
-StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options) {
+StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options,
+                                 std::vector<std::uint32_t>* file_vertex) {
     std::error_code ec;
     if (!std::filesystem::exists(path, ec)) {
         return not_found("mesh file '" + path + "': no such file");
@@ -302,7 +334,7 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
         const std::string inner =
             key == "gz" ? lower(std::filesystem::path(path).stem().extension().string()) : "";
         return read_mesh_from_memory(packed, inner.empty() ? "gz" : inner.substr(1) + ".gz", path,
-                                     options);
+                                     options, file_vertex);
     }
     // PLY, OFF, OBJ and glTF are read by our own readers, in double: Debian's assimp reads at
     // float precision. PLY and OFF are also recognised by content under any other extension
@@ -317,14 +349,14 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
         }
     }
     if (assimp) {
-        return finish(read_with_assimp(path), path, options);
+        return finish(read_with_assimp(path), path, options, file_vertex);
     }
     std::string data;
     if (Status s = read_file(path, data); !s.ok()) {
         return s;
     }
     if (own == OwnReader::obj) {
-        return finish(detail::read_obj(path, data), path, options);
+        return finish(detail::read_obj(path, data), path, options, file_vertex);
     }
     if (own == OwnReader::gltf || own == OwnReader::glb) {
         // External buffers: files in the .gltf's own directory or below it, named relatively.
@@ -350,16 +382,18 @@ StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions&
             }
             return bytes;
         };
-        return finish(detail::read_gltf(path, data, own == OwnReader::glb, load), path, options);
+        return finish(detail::read_gltf(path, data, own == OwnReader::glb, load), path, options,
+                      file_vertex);
     }
     return finish(format == detail::NativeMeshFormat::ply ? detail::read_ply(path, data)
                                                           : detail::read_off(path, data),
-                  path, options);
+                  path, options, file_vertex);
 }
 
 StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
                                              const std::string& name,
-                                             const MeshReadOptions& options) {
+                                             const MeshReadOptions& options,
+                                             std::vector<std::uint32_t>* file_vertex) {
     std::string key = lower(format);
     if (key.starts_with('.')) {
         key.erase(0, 1);
@@ -388,17 +422,17 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
             }
             key = content == detail::NativeMeshFormat::ply ? "ply" : "off";
         }
-        return read_mesh_from_memory(unpacked.value(), key, name, options);
+        return read_mesh_from_memory(unpacked.value(), key, name, options, file_vertex);
     }
     if (key == "ply") {
-        return finish(detail::read_ply(name, data), name, options);
+        return finish(detail::read_ply(name, data), name, options, file_vertex);
     }
     if (key == "off") {
-        return finish(detail::read_off(name, data), name, options);
+        return finish(detail::read_off(name, data), name, options, file_vertex);
     }
     switch (own_reader(key)) {
         case OwnReader::obj:
-            return finish(detail::read_obj(name, data), name, options);
+            return finish(detail::read_obj(name, data), name, options, file_vertex);
         case OwnReader::gltf:
         case OwnReader::glb: {
             // Nothing but the bytes given is read: a .gltf's external buffers are not found.
@@ -407,7 +441,8 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
                 return not_found("mesh file '" + name + "': buffer '" + uri +
                                  "': only buffers inside the data are read from memory");
             };
-            return finish(detail::read_gltf(name, data, key == "glb", none), name, options);
+            return finish(detail::read_gltf(name, data, key == "glb", none), name, options,
+                          file_vertex);
         }
         case OwnReader::none:
             break;
@@ -415,7 +450,7 @@ StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_
     if (!is_assimp_format(key)) {
         return unsupported_format(name, std::string(format));
     }
-    return finish(read_memory_with_assimp(data, key, name), name, options);
+    return finish(read_memory_with_assimp(data, key, name), name, options, file_vertex);
 }
 
 Status write_off(const std::string& path, const TriangleMesh& mesh) {

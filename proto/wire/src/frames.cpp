@@ -386,6 +386,12 @@ void encode_ccd_result(const ccd::CcdResult& result, v1::CcdResult* out) {
         r->set_other_primitive(p.other_primitive);
         r->set_toi(p.toi);
         r->set_capped(p.capped);
+        for (std::size_t k = 0; k < ccd::vertex_count(p.kind); ++k) {
+            r->add_vertices(p.vertices[k]);
+        }
+        for (std::size_t k = 0; k < ccd::other_vertex_count(p.kind); ++k) {
+            r->add_other_vertices(p.other_vertices[k]);
+        }
     }
     for (const auto& o : result.object_pairs) {
         auto* r = out->add_object_pairs();
@@ -426,6 +432,21 @@ StatusOr<ccd::CcdResult> decode_ccd_result(const v1::CcdResult& in, std::size_t 
         e.other_primitive = p.other_primitive();
         e.toi = p.toi();
         e.capped = p.capped();
+        if (static_cast<std::size_t>(p.vertices_size()) != ccd::vertex_count(e.kind) ||
+            static_cast<std::size_t>(p.other_vertices_size()) != ccd::other_vertex_count(e.kind)) {
+            return malformed("CCD pair " + std::to_string(out.pairs.size()) + " names " +
+                             std::to_string(p.vertices_size()) + " and " +
+                             std::to_string(p.other_vertices_size()) + " vertices (" +
+                             std::string(ccd::ccd_kind_name(e.kind)) + " needs " +
+                             std::to_string(ccd::vertex_count(e.kind)) + " and " +
+                             std::to_string(ccd::other_vertex_count(e.kind)) + ")");
+        }
+        for (int k = 0; k < p.vertices_size(); ++k) {
+            e.vertices[static_cast<std::size_t>(k)] = p.vertices(k);
+        }
+        for (int k = 0; k < p.other_vertices_size(); ++k) {
+            e.other_vertices[static_cast<std::size_t>(k)] = p.other_vertices(k);
+        }
         out.pairs.push_back(e);
     }
     for (const auto& o : in.object_pairs()) {

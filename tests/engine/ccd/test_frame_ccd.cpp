@@ -628,7 +628,7 @@ constexpr std::array<FramePair, 5> FRAME_PAIRS{{
 // share their topology, and splits them into objects by the connected components of t0.
 bool load_frames(const std::string& dir, const FramePair& fp, Scene& scene, Frame& p1) {
     MeshReadOptions raw;
-    raw.weld_identical_positions = false;
+    raw.weld = WeldMode::never;
     auto m0 = read_mesh(dir + "/frames/" + fp.t0, raw);
     auto m1 = read_mesh(dir + "/frames/" + fp.t1, raw);
     EXPECT_TRUE(m0.ok()) << m0.status().to_string();

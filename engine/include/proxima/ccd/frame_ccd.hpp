@@ -53,7 +53,20 @@ struct CcdPair {
     std::uint32_t other_primitive = 0;
     double toi = 1.0;     // no later than the earliest contact of the pair
     bool capped = false;  // the elementary test reached its work bound (hit and toi conservative)
+    // The primitives' vertex ids in their objects' own numbering, so that a caller can act on
+    // them without the edge list: vf: `vertices` = {the vertex}, `other_vertices` = the triangle's
+    // three corners in the topology's order; ee: each edge's two vertices, smaller first. The
+    // first vertex_count(kind) / other_vertex_count(kind) entries are used, the rest are 0.
+    std::array<std::uint32_t, 3> vertices{};
+    std::array<std::uint32_t, 3> other_vertices{};
 };
+
+constexpr std::size_t vertex_count(CcdKind kind) {
+    return kind == CcdKind::vertex_face ? 1 : 2;
+}
+constexpr std::size_t other_vertex_count(CcdKind kind) {
+    return kind == CcdKind::vertex_face ? 3 : 2;
+}
 
 // Earliest time of impact of one object pair (object <= other; object == other for
 // self-contacts): `pair` indexes CcdResult::pairs (the first of the pairs with that toi).

@@ -22,17 +22,26 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "proxima/mesh/mesh.hpp"
 #include "proxima/status.hpp"
 
 namespace proxima {
 
+// When vertices with bit-identical positions are merged into one.
+enum class WeldMode {
+    // Only a triangle soup: a file in which no vertex is used by two triangle corners (STL, and
+    // exporters that write every corner on its own). Such a file has no connectivity otherwise, and
+    // every neighbouring triangle would count as a contact. An indexed file that shares vertices
+    // keeps them all: coincident but distinct vertices are distinct, and their contacts count.
+    triangle_soups,
+    always,  // every file (the CLI's --weld)
+    never,
+};
+
 struct MeshReadOptions {
-    // Merge vertices with bit-identical positions. Formats that store one vertex per triangle
-    // corner (STL, and OBJ/PLY files whose corners carry distinct normals or texture coordinates)
-    // lose their connectivity otherwise, and every neighbouring triangle would count as a contact.
-    bool weld_identical_positions = true;
+    WeldMode weld = WeldMode::triangle_soups;
     // gzip-compressed files (".ply.gz", or gzip data under a name no reader claims) are
     // decompressed in memory
     // up to this many bytes, then read like the file they hold; past it the read fails (a
@@ -48,7 +57,11 @@ struct MeshReadOptions {
 // points and lines dropped (engine/src/io/gltf.hpp). Errors name the file and the problem:
 // missing (not_found), unreadable, a format outside the allowlist, truncated or malformed data,
 // header counts the file cannot hold, no triangles, non-finite coordinates (all invalid_argument).
-StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options = {});
+// `file_vertex`, when given, receives for each vertex of the mesh its index in the file as read
+// (before any weld; a welded vertex names its first occurrence), so that answers can name the
+// caller's own vertex ids.
+StatusOr<TriangleMesh> read_mesh(const std::string& path, const MeshReadOptions& options = {},
+                                 std::vector<std::uint32_t>* file_vertex = nullptr);
 
 // The accepted formats, as error messages list them.
 inline constexpr std::string_view ACCEPTED_MESH_FORMATS =
@@ -63,7 +76,8 @@ inline constexpr std::string_view ACCEPTED_MESH_FORMATS =
 // fuzz target tests/fuzz/fuzz_mesh.cpp reads through this.
 StatusOr<TriangleMesh> read_mesh_from_memory(std::string_view data, std::string_view format,
                                              const std::string& name,
-                                             const MeshReadOptions& options = {});
+                                             const MeshReadOptions& options = {},
+                                             std::vector<std::uint32_t>* file_vertex = nullptr);
 
 // Writes an ASCII OFF file (for tests and tools; exact round trip of doubles with %.17g).
 Status write_off(const std::string& path, const TriangleMesh& mesh);
