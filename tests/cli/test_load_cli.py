@@ -67,9 +67,9 @@ class LoadCli(unittest.TestCase):
         plot = ["--plot", cls.png] if cls.have_gnuplot else []
         cls.load_run = run(PROXIMA, "load", "--server", cls.address, "--duration", "6s",
                            "--warmup", "1s", "--clients", "sim=2,review=2,verify=1", "--scene",
-                           "bowl,breaking", "--queries", "separation,collisions,ccd",
-                           "--edit-every", "3", "--metrics", f"http://{cls.metrics}/metrics",
-                           "--json", *plot, timeout=120)
+                           "bowl,breaking", "--episode-frames", "8", "--queries",
+                           "separation,collisions,ccd", "--edit-every", "3", "--metrics",
+                           f"http://{cls.metrics}/metrics", "--json", *plot, timeout=120)
 
     @classmethod
     def stop_daemon(cls):
@@ -134,7 +134,7 @@ class LoadCli(unittest.TestCase):
         self.check_ghz("all", doc)
         self.assertEqual(doc["count"], sum(k["count"] for k in doc["kinds"].values()))
         self.assertAlmostEqual(doc["measured_seconds"], 5.0, delta=1.0)
-        self.assertEqual(doc["total"], round(doc["measured_seconds"] * 1e9), doc["total"])
+        self.assertAlmostEqual(doc["total"], doc["measured_seconds"] * 1e9, delta=2)
         self.assertGreater(doc["warmup_count"], 0)
         # The timeline covers every call, warm-up included.
         self.assertEqual(sum(s["kinds"].get("review_join", 0) for s in doc["timeline"]), 2)
