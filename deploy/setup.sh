@@ -32,6 +32,8 @@ packages=(
   clang-format clang-tidy
   # The CLI's JSON output against docs/json-output.schema.json (tests/cli/test_json_schema.py).
   python3-jsonschema
+  # proxima load --plot FILE.png: latency and throughput plots (gnuplot's pngcairo terminal).
+  gnuplot-nox
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }

@@ -5,9 +5,15 @@
 // verify_stream.cpp (VerifyModel), review_stream.cpp (Review); the two bidirectional streams
 // share ordered_stream.hpp.
 #include "service.hpp"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
+#include <fstream>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
@@ -126,6 +132,30 @@ Status ProximityService::start() {
     return start_models();
 }
 
+namespace {
+
+// Resident set size from /proc/self/statm (pages); none where it cannot be read.
+std::optional<std::uint64_t> resident_bytes() {
+    std::ifstream statm("/proc/self/statm");
+    std::uint64_t size = 0;
+    std::uint64_t resident = 0;
+    if (!(statm >> size >> resident)) {
+        return std::nullopt;
+    }
+    return resident * static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
+}
+
+double cpu_seconds() {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    auto seconds = [](const timeval& t) {
+        return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) * 1e-6;
+    };
+    return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
+}  // namespace
+
 StatusOr<std::string> ProximityService::start_metrics(const std::string& address) {
     return m_shared->metrics.listen(address);
 }
@@ -144,6 +174,14 @@ void ProximityService::sample_metrics(std::vector<Sample>& out) const {
                        std::vector<std::pair<std::string, std::string>> labels = {}) {
         out.push_back({name, help, true, std::move(labels), value});
     };
+    // The process's own resources, under the names Prometheus client libraries use (the
+    // load harness, proxima load, samples them over a run).
+    if (const auto rss = resident_bytes()) {
+        gauge("process_resident_memory_bytes", "Resident memory of the daemon in bytes",
+              static_cast<double>(*rss));
+    }
+    counter("process_cpu_seconds_total", "User and system CPU time of the daemon in seconds",
+            cpu_seconds());
     gauge("proxima_live_scenes", "Scenes alive, stream-owned ones included",
           static_cast<double>(live_scenes()));
     gauge("proxima_live_streams", "Frame streams and review members connected",

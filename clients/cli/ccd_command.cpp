@@ -55,31 +55,27 @@ nlohmann::json pair_json(const ccd::CcdPair& p) {
         {"capped", p.capped}};
 }
 
-// The two frames as loaded: the objects of T0_FILE (the scene at t = 0) and the vertices of the
-// same objects in T1_FILE. Both files must give the same objects with the same triangles.
-struct Frames {
-    std::vector<client::InputObject> objects;  // at t = 0
-    std::vector<std::vector<Vec3>> positions_t1;
-};
+}  // namespace
 
-StatusOr<Frames> load_frames(const CcdArgs& args) {
-    auto t0 = client::load_objects({args.files[0]}, args.split_components, weld_mode(args.weld));
+StatusOr<FramePair> load_frame_pair(const std::string& t0_file, const std::string& t1_file,
+                                    bool split_components, WeldMode weld) {
+    auto t0 = client::load_objects({t0_file}, split_components, weld);
     if (!t0.ok()) {
         return t0.status();
     }
-    auto t1 = client::load_objects({args.files[1]}, args.split_components, weld_mode(args.weld));
+    auto t1 = client::load_objects({t1_file}, split_components, weld);
     if (!t1.ok()) {
         return t1.status();
     }
     const auto& a = t0.value();
     const auto& b = t1.value();
-    const std::string both = "'" + args.files[0] + "' and '" + args.files[1] + "'";
+    const std::string both = "'" + t0_file + "' and '" + t1_file + "'";
     if (a.size() != b.size()) {
         return invalid_argument(both +
                                 " do not have the same topology: " + std::to_string(a.size()) +
                                 " objects at t0, " + std::to_string(b.size()) + " at t1");
     }
-    Frames frames;
+    FramePair frames;
     for (std::size_t i = 0; i < a.size(); ++i) {
         const auto& ma = a[i].mesh.mesh;
         const auto& mb = b[i].mesh.mesh;
@@ -100,6 +96,8 @@ StatusOr<Frames> load_frames(const CcdArgs& args) {
     frames.objects = std::move(t0).value();
     return frames;
 }
+
+namespace {
 
 // Prints a CCD result, local or from a daemon. Objects are indices of the objects as loaded
 // (files in order, or their connected components with --split-components); every other id is the
@@ -186,7 +184,7 @@ int print_ccd_result(const std::vector<client::InputObject>& objects, const ccd:
     return 0;
 }
 
-StatusOr<ccd::CcdResult> ccd_local(const Frames& frames, const ccd::CcdRequest& request) {
+StatusOr<ccd::CcdResult> ccd_local(const FramePair& frames, const ccd::CcdRequest& request) {
     Scene scene;
     for (const auto& obj : frames.objects) {
         auto id = scene.add_object(obj.mesh);
@@ -199,7 +197,7 @@ StatusOr<ccd::CcdResult> ccd_local(const Frames& frames, const ccd::CcdRequest& 
 
 // On the daemon: a scene with the T0 objects (in input order, so indices mean the same as
 // locally), one CCD frame moving every object to its T1 positions, then the scene is deleted.
-StatusOr<ccd::CcdResult> ccd_remote(const CcdArgs& args, const Frames& frames,
+StatusOr<ccd::CcdResult> ccd_remote(const CcdArgs& args, const FramePair& frames,
                                     const ccd::CcdRequest& request) {
     auto c = connect_server(args.server, args.server_flags);
     if (!c.ok()) {
@@ -226,7 +224,8 @@ StatusOr<ccd::CcdResult> ccd_remote(const CcdArgs& args, const Frames& frames,
 }
 
 int run_ccd(const CcdArgs& args) {
-    auto frames = load_frames(args);
+    auto frames =
+        load_frame_pair(args.files[0], args.files[1], args.split_components, weld_mode(args.weld));
     if (!frames.ok()) {
         return fail(frames.status());
     }

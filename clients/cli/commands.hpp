@@ -21,6 +21,16 @@ void add_ccd_queries_command(CLI::App& app, int& exit_code);
 // proxima ccd: continuous collisions between two frames of mesh files
 // (clients/cli/ccd_command.cpp).
 void add_ccd_command(CLI::App& app, int& exit_code);
+// Two frames of one scene as loaded (clients/cli/ccd_command.cpp): the objects of the t0 file
+// (the scene at t = 0) and the vertices of the same objects in the t1 file. Both files must give
+// the same objects with the same triangles (invalid_argument naming the difference otherwise);
+// `weld` as in client::load_objects.
+struct FramePair {
+    std::vector<client::InputObject> objects;  // at t = 0
+    std::vector<std::vector<Vec3>> positions_t1;
+};
+StatusOr<FramePair> load_frame_pair(const std::string& t0_file, const std::string& t1_file,
+                                    bool split_components, WeldMode weld);
 // proxima import and proxima store-info: the on-disk model store
 // (clients/cli/import_command.cpp).
 void add_import_command(CLI::App& app, int& exit_code);
@@ -33,6 +43,8 @@ void add_play_command(CLI::App& app, int& exit_code);
 // proxima models, verify and review: massive models on a daemon or in a local store
 // (clients/cli/massive_command.cpp).
 void add_massive_commands(CLI::App& app, int& exit_code);
+// proxima load: the load-test harness (clients/cli/load_command.cpp).
+void add_load_command(CLI::App& app, int& exit_code);
 
 // --weld (merge identical positions in every file) as a WeldMode; without it only triangle soups
 // are welded (commands that read mesh files: distance, ccd).

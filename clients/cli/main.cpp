@@ -11,12 +11,12 @@
 #include <iostream>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "cli/commands.hpp"
+#include "cli/id_map.hpp"
 #include "client/proxima_client.hpp"
 #include "common/json_output.hpp"
 #include "common/local_scene.hpp"
@@ -412,86 +412,6 @@ int run_demo_local(const DemoArgs& args, scenes::ProceduralScene& scene,
     return 0;
 }
 
-// Local mirror ids -> daemon ids. The procedural steps name objects by the ids of the Scene they
-// are given (our mirror); the daemon numbers its objects itself, so every id in an update is
-// translated, and the ids the daemon gives new objects are learned from each result.
-class IdMap {
-  public:
-    StatusOr<ObjectId> remote(ObjectId local) const {
-        auto it = m_remote.find(local);
-        if (it == m_remote.end()) {
-            return Status(StatusCode::internal,
-                          "object " + std::to_string(local) + " has no daemon id");
-        }
-        return it->second;
-    }
-
-    StatusOr<SceneUpdate> translate(const SceneUpdate& local) const {
-        SceneUpdate out;
-        for (auto id : local.removals) {
-            auto r = remote(id);
-            if (!r.ok()) {
-                return r.status();
-            }
-            out.removals.push_back(r.value());
-        }
-        for (const auto& rep : local.replacements) {
-            auto r = remote(rep.object);
-            if (!r.ok()) {
-                return r.status();
-            }
-            out.replacements.push_back({r.value(), rep.fragments});
-        }
-        for (const auto& pos : local.positions) {
-            auto r = remote(pos.object);
-            if (!r.ok()) {
-                return r.status();
-            }
-            out.positions.push_back({r.value(), pos.vertices});
-        }
-        out.additions = local.additions;
-        return out;
-    }
-
-    // After a frame: forget removed and replaced objects, learn the new ones' ids.
-    Status update(const SceneUpdate& local_update, const SceneUpdateResult& local,
-                  const client::FrameResponse& remote) {
-        if (remote.added_ids.size() != local.added_ids.size() ||
-            remote.fragment_ids.size() != local.fragment_ids.size()) {
-            return {StatusCode::internal,
-                    "the daemon reported ids for " + std::to_string(remote.added_ids.size()) +
-                        " additions and " + std::to_string(remote.fragment_ids.size()) +
-                        " topology changes; the frame had " +
-                        std::to_string(local.added_ids.size()) + " and " +
-                        std::to_string(local.fragment_ids.size())};
-        }
-        for (auto id : local_update.removals) {
-            m_remote.erase(id);
-        }
-        for (const auto& rep : local_update.replacements) {
-            m_remote.erase(rep.object);
-        }
-        for (std::size_t i = 0; i < local.fragment_ids.size(); ++i) {
-            if (remote.fragment_ids[i].size() != local.fragment_ids[i].size()) {
-                return {StatusCode::internal,
-                        "the daemon reported " + std::to_string(remote.fragment_ids[i].size()) +
-                            " fragment ids for topology change " + std::to_string(i) + " of " +
-                            std::to_string(local.fragment_ids[i].size())};
-            }
-            for (std::size_t j = 0; j < local.fragment_ids[i].size(); ++j) {
-                m_remote[local.fragment_ids[i][j]] = remote.fragment_ids[i][j];
-            }
-        }
-        for (std::size_t i = 0; i < local.added_ids.size(); ++i) {
-            m_remote[local.added_ids[i]] = remote.added_ids[i];
-        }
-        return {};
-    }
-
-  private:
-    std::unordered_map<ObjectId, ObjectId> m_remote;
-};
-
 // Streams the scene over one StreamFrames call, in lockstep (send a frame, read its result) so
 // that the round trip of each frame is measured alone. The scene is stream-owned: the first frame
 // creates it from its additions and the daemon deletes it when the stream ends.
@@ -507,7 +427,7 @@ int run_demo_remote(const DemoArgs& args, scenes::ProceduralScene& scene,
     }
     auto& frames = *stream.value();
     Scene mirror;
-    IdMap ids;
+    cli::IdMap ids;
     print_demo_header(args, scene);
     std::vector<double> engine_ms;
     std::vector<double> rtt_ms;
@@ -781,6 +701,7 @@ int main(int argc, char** argv) {
         cli::add_generate_command(app, command_exit);
         cli::add_massive_commands(app, command_exit);
         cli::add_play_command(app, command_exit);
+        cli::add_load_command(app, command_exit);
 
         if (const int code = cli::parse_command_line(app, argc, argv); code >= 0) {
             return code;

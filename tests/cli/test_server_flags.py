@@ -95,6 +95,7 @@ class ServerFlags(unittest.TestCase):
             ["verify", "--server", address, "--model", "m", "--tolerance", "0"],
             ["review", "--server", address, "--model", "m", "--avatar", self.box, "--path",
              self.path],
+            ["load", "--server", address, "--duration", "1s", "--warmup", "0"],
         ]
 
     def expect_error(self, p, code, *fragments):

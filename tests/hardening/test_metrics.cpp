@@ -146,6 +146,10 @@ TEST(Metrics, PrometheusEndpointCountsCallsFramesQuotasAndState) {
     // The GPU backend's state is always there (1 on llvmpipe, 0 where EGL cannot start).
     EXPECT_GE(metric(text, "proxima_gpu_active"), 0);
     EXPECT_GE(metric(text, "proxima_dvd_kernel_seconds_total", {{"backend", "cpu"}}), 0);
+    // The process's own resources, under Prometheus' client-library names (proxima load
+    // samples them).
+    EXPECT_GT(metric(text, "process_resident_memory_bytes"), 1 << 20);
+    EXPECT_GT(metric(text, "process_cpu_seconds_total"), 0);
 }
 
 // Issue #18: a stream whose client cancels it (or whose deadline passes) while the daemon is
