@@ -229,11 +229,11 @@ namespace {
 
 // 16 hex digits: a Client's own routing key when the caller names none.
 std::string random_route_suffix(std::mt19937_64& rng) {
-    static constexpr std::string_view digits = "0123456789abcdef";
+    static constexpr std::string_view DIGITS = "0123456789abcdef";
     std::string out;
     auto bits = rng();
     for (int i = 0; i < 16; ++i) {
-        out += digits[bits & 0xfU];
+        out += DIGITS[bits & 0xfU];
         bits >>= 4U;
     }
     return out;
@@ -286,7 +286,7 @@ struct Client::Impl {
         }
         const std::string& key = route.empty() ? options.route : route;
         if (!key.empty()) {
-            context.AddMetadata(route_header, key);
+            context.AddMetadata(ROUTE_HEADER, key);
         }
     }
 

@@ -113,7 +113,7 @@ struct ConnectOptions {
 };
 
 // The metadata key of ConnectOptions::route.
-inline constexpr const char* route_header = "x-proxima-route";
+inline constexpr const char* ROUTE_HEADER = "x-proxima-route";
 
 struct RemoteServerInfo {
     std::string version;

@@ -198,6 +198,16 @@ def test_routes_are_sticky_and_survive_a_daemon(cluster):
         assert c.server_info().live_scenes == sum(1 for d in home.values() if d == i)
 
     victim = max(range(3), key=lambda i: sum(1 for d in home.values() if d == i))
+    # One open frame stream on the victim and one on another daemon.
+    streams = {}
+    for s in sessions:
+        side = home[s.route] == victim
+        if side not in streams:
+            stream = s.client.open_stream(timeout=10)
+            streams[side] = (s, stream)
+            stream.send(proxima.make_frame(scene_id=s.scene.scene_id,
+                                           positions={s.b: gap_positions(0.5)}))
+            assert float(stream.receive().distances[0]) == pytest.approx(0.5)
     cluster["daemons"][victim][0].send_signal(signal.SIGKILL)
     cluster["daemons"][victim][0].wait()
     direct[victim].close()
@@ -208,6 +218,19 @@ def test_routes_are_sticky_and_survive_a_daemon(cluster):
     assert lost and kept
     for s in kept:  # at once: no error for the other daemons' clients
         assert s.query(1.75) == pytest.approx(1.75)
+    s, stream = streams[False]
+    stream.send(proxima.make_frame(scene_id=s.scene.scene_id, positions={s.b: gap_positions(1.5)}))
+    assert float(stream.receive().distances[0]) == pytest.approx(1.5)
+    stream.close()
+    # The victim's open stream ends. Through HAProxy that is CANCELLED ("Received RST_STREAM
+    # with error code 8": HAProxy resets the client's stream when its server connection dies),
+    # not the UNAVAILABLE a direct connection gives (docs/deploy.md).
+    s, stream = streams[True]
+    with pytest.raises(proxima.ProximaError) as ended:
+        stream.send(proxima.make_frame(scene_id=s.scene.scene_id,
+                                       positions={s.b: gap_positions(1.5)}))
+        stream.receive()
+    assert ended.value.code in (grpc.StatusCode.CANCELLED, grpc.StatusCode.UNAVAILABLE), ended.value
     # The victim's clients: the next call fails with UNAVAILABLE (HAProxy cannot reach the
     # daemon) or, once the health check has moved the route, NOT_FOUND (a daemon without it).
     codes = set()
