@@ -29,6 +29,7 @@ import pytest
 import proxima
 
 PROXIMAD = os.environ.get("PROXIMAD", "")
+PROXIMA = os.environ.get("PROXIMA", "")
 SOURCE = Path(os.environ.get("PROXIMA_SOURCE_DIR", Path(__file__).resolve().parents[2]))
 HAPROXY = shutil.which("haproxy") or (
     "/usr/sbin/haproxy" if os.access("/usr/sbin/haproxy", os.X_OK) else None)
@@ -267,6 +268,28 @@ def test_routes_are_sticky_and_survive_a_daemon(cluster):
             c.close()
     for s in sessions:
         s.client.close()
+
+
+def write_obj(path, mesh, offset):
+    lines = [f"v {x + offset} {y} {z}" for x, y, z in mesh.vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.triangles]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_cli_calls_meet_on_one_daemon(cluster, tmp_path):
+    """`proxima distance --server` makes three calls (CreateScene, Query, DeleteScene): without
+    the CLI's own route they would be spread over the daemons and the Query would not find the
+    scene. Run several times, so the random routes cover more than one daemon."""
+    if not PROXIMA:
+        pytest.fail("PROXIMA (the proxima binary) is not set")
+    a, b = tmp_path / "a.obj", tmp_path / "b.obj"
+    write_obj(a, cube("a"), 0.0)
+    write_obj(b, cube("b"), 1.25)
+    for _ in range(6):
+        run = subprocess.run([PROXIMA, "distance", "--server", cluster["front"], "--json",
+                              str(a), str(b)], capture_output=True, text=True, timeout=60)
+        assert run.returncode == 0, run.stderr
+        assert "0.25" in run.stdout, run.stdout
 
 
 if __name__ == "__main__":
