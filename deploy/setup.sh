@@ -34,6 +34,8 @@ packages=(
   python3-jsonschema
   # proxima load --plot FILE.png: latency and throughput plots (gnuplot's pngcairo terminal).
   gnuplot-nox
+  # Scale-out (docs/deploy.md): several daemons behind HAProxy (tests/scaleout/test_haproxy.py).
+  haproxy
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -75,20 +77,23 @@ install_packages() {
 }
 
 npm_packages() {
-  # `npm ci` from the lockfile, skipped while node_modules holds that lockfile's install.
-  local dir="$here/tests/grpcjs"
-  local stamp="$dir/node_modules/.proxima-package-lock.sha256"
-  local want
-  want="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
-  if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
-    log "tests/grpcjs: node_modules matches package-lock.json"
-    return
-  fi
-  log "tests/grpcjs: npm ci (node $(node --version), npm $(npm --version))"
-  cd "$dir"
-  run_quiet npm ci --no-audit --no-fund
-  cd "$here"
-  printf '%s\n' "$want" >"$stamp"
+  # `npm ci` from each lockfile (tests/grpcjs: the daemon from grpc-js; tests/k8s: the Kubernetes
+  # manifests' schema check), skipped while node_modules holds that lockfile's install.
+  local name dir stamp want
+  for name in grpcjs k8s; do
+    dir="$here/tests/$name"
+    stamp="$dir/node_modules/.proxima-package-lock.sha256"
+    want="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
+    if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+      log "tests/$name: node_modules matches package-lock.json"
+      continue
+    fi
+    log "tests/$name: npm ci (node $(node --version), npm $(npm --version))"
+    cd "$dir"
+    run_quiet npm ci --no-audit --no-fund
+    cd "$here"
+    printf '%s\n' "$want" >"$stamp"
+  done
 }
 
 build() {

@@ -83,6 +83,7 @@ class Sampled final : public prometheus::Collectable {
 struct Metrics::Impl {
     std::shared_ptr<prometheus::Registry> registry = std::make_shared<prometheus::Registry>();
     std::shared_ptr<Sampled> sampled = std::make_shared<Sampled>();
+    std::shared_ptr<Sampled> health = std::make_shared<Sampled>();  // GET /healthz
     prometheus::Family<prometheus::Counter>& requests =
         prometheus::BuildCounter()
             .Name("proxima_requests_total")
@@ -142,6 +143,7 @@ StatusOr<std::string> Metrics::listen(const std::string& address) {
     }
     m_impl->exposer->RegisterCollectable(m_impl->registry);
     m_impl->exposer->RegisterCollectable(m_impl->sampled);
+    m_impl->exposer->RegisterCollectable(m_impl->health, "/healthz");
     const auto ports = m_impl->exposer->GetListeningPorts();
     const auto host = address.substr(0, address.rfind(':'));
     return host + ":" + std::to_string(ports.empty() ? 0 : ports.front());
@@ -179,6 +181,16 @@ void Metrics::add_scene_expired() {
 
 void Metrics::set_sampler(std::function<void(std::vector<Sample>&)> sampler) {
     m_impl->sampled->set(std::move(sampler));
+}
+
+void Metrics::set_serving(std::function<bool()> serving) {
+    m_impl->health->set([serving = std::move(serving)](std::vector<Sample>& out) {
+        out.push_back({"proxima_serving",
+                       "1 while the gRPC health status is SERVING, 0 once shutdown starts",
+                       false,
+                       {},
+                       serving() ? 1.0 : 0.0});
+    });
 }
 
 std::string Metrics::render() const {

@@ -37,7 +37,8 @@ class Metrics {
     Metrics(const Metrics&) = delete;
     Metrics& operator=(const Metrics&) = delete;
 
-    // Serves GET /metrics on `address` (HOST:PORT, port 0 picks one); returns HOST:PORT bound.
+    // Serves GET /metrics (and GET /healthz, set_serving) on `address` (HOST:PORT, port 0 picks
+    // one); returns HOST:PORT bound.
     StatusOr<std::string> listen(const std::string& address);
 
     // One finished call: proxima_requests_total and proxima_request_duration_seconds by method
@@ -52,6 +53,11 @@ class Metrics {
 
     // Called at every scrape; appends the current values of things tracked elsewhere.
     void set_sampler(std::function<void(std::vector<Sample>&)> sampler);
+    // GET /healthz on the same listener: the one gauge `proxima_serving`, 1 while `serving()`
+    // (the gRPC health status is SERVING), 0 once shutdown starts. For load balancers that
+    // cannot speak the gRPC health protocol (HAProxy: `http-check expect string
+    // "proxima_serving 1"`, deploy/haproxy/haproxy.cfg).
+    void set_serving(std::function<bool()> serving);
 
     // The text exposition format of everything (what GET /metrics returns).
     std::string render() const;

@@ -126,6 +126,10 @@ Status ProximityService::start() {
             shared.config.listen);
     }
     shared.metrics.set_sampler([this](std::vector<Sample>& out) { sample_metrics(out); });
+    shared.metrics.set_serving([this] {
+        std::lock_guard lock(m_shared->calls_mu);
+        return !m_shared->draining;
+    });
     if (shared.config.idle_scene_seconds > 0) {
         shared.start_reaper();
     }

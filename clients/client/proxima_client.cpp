@@ -225,6 +225,22 @@ StatusOr<std::string> read_token_file(const std::string& path, std::string* warn
     return line;
 }
 
+namespace {
+
+// 16 hex digits: a Client's own routing key when the caller names none.
+std::string random_route_suffix(std::mt19937_64& rng) {
+    static constexpr std::string_view DIGITS = "0123456789abcdef";
+    std::string out;
+    auto bits = rng();
+    for (int i = 0; i < 16; ++i) {
+        out += DIGITS[bits & 0xfU];
+        bits >>= 4U;
+    }
+    return out;
+}
+
+}  // namespace
+
 struct Client::Impl {
     std::string address;
     ConnectOptions options;
@@ -237,6 +253,8 @@ struct Client::Impl {
     std::shared_ptr<pb::Proximity::Stub> stub;
     std::mutex rng_mu;
     std::mt19937_64 rng{std::random_device{}()};
+    // Whether the caller chose options.route (else it is this Client's random one).
+    bool explicit_route = false;
 
     void new_channel() {
         auto fresh = grpc::CreateCustomChannel(address, credentials, channel_args);
@@ -257,12 +275,18 @@ struct Client::Impl {
     }
 
     // Deadline (unary calls only: a stream lives as long as its caller wants) and the token.
-    void prepare(grpc::ClientContext& context, bool unary = true) const {
+    // `route`: the routing key for this call instead of options.route (empty: options.route).
+    void prepare(grpc::ClientContext& context, bool unary = true,
+                 const std::string& route = {}) const {
         if (unary && options.call_timeout.count() > 0) {
             context.set_deadline(deadline_after(options.call_timeout));
         }
         if (!options.token.empty()) {
             context.AddMetadata("authorization", "Bearer " + options.token);
+        }
+        const std::string& key = route.empty() ? options.route : route;
+        if (!key.empty()) {
+            context.AddMetadata(ROUTE_HEADER, key);
         }
     }
 
@@ -478,6 +502,11 @@ StatusOr<std::unique_ptr<Client>> Client::connect(const std::string& address,
     auto impl = std::make_unique<Impl>();
     impl->address = address;
     impl->options = std::move(options);
+    impl->explicit_route = !impl->options.route.empty();
+    if (!impl->explicit_route) {
+        // Every call of this Client reaches the same daemon behind a load balancer.
+        impl->options.route = "client-" + random_route_suffix(impl->rng);
+    }
     impl->credentials = std::move(credentials);
     impl->channel_args = args;
     impl->new_channel();
@@ -935,7 +964,10 @@ StatusOr<std::unique_ptr<ReviewSession>> Client::join_review(const ReviewJoin& j
         !st.ok()) {
         return st;
     }
-    m_impl->prepare(impl->context, false);
+    // A review room's members must meet on one daemon: the room's name is their route,
+    // unless the caller chose one.
+    m_impl->prepare(impl->context, false,
+                    m_impl->explicit_route || join.room.empty() ? std::string() : join.room);
     impl->stub = m_impl->stub_now();
     impl->stream = impl->stub->Review(&impl->context);
     if (!impl->stream) {

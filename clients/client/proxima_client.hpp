@@ -103,7 +103,17 @@ struct ConnectOptions {
     std::size_t inline_mesh_bytes = 1u << 20;
     // Reconnect and retry policy of connect() and of the calls that are safe to repeat.
     RetryOptions retry;
+    // Routing key for a load balancer in front of several daemons (docs/deploy.md): every call
+    // carries the metadata `x-proxima-route: <route>`, so HAProxy's consistent hash sends every
+    // call of one scene or room to the same daemon. Pick it before creating the scene (its name,
+    // for example) and use one Client per route. Empty: the Client picks a random route of its
+    // own ("client-" and 16 hex digits), so all its calls still meet on one daemon, and a review
+    // stream carries its room's name instead. The daemon itself ignores the header.
+    std::string route;
 };
+
+// The metadata key of ConnectOptions::route.
+inline constexpr const char* ROUTE_HEADER = "x-proxima-route";
 
 struct RemoteServerInfo {
     std::string version;

@@ -27,6 +27,20 @@ def test_server_info(client: proxima.Client) -> None:
     assert info.gpu_active or info.gpu_fallback_reason
 
 
+def test_route(daemon: Daemon) -> None:
+    """Every Client has a route (docs/deploy.md): its own random key unless one is given."""
+    with proxima.Client(daemon.address) as a, proxima.Client(daemon.address) as b:
+        assert re.fullmatch(r"client-[0-9a-f]{16}", a.route) and a.route != b.route
+    with proxima.Client(daemon.address, route="scene-7") as c:
+        assert c.route == "scene-7"
+        assert c.server_info().api == "proxima.v1"  # the daemon ignores the header
+    for bad in ("", "caf\u00e9", "a\nb"):
+        with pytest.raises(proxima.ProximaError) as e:
+            proxima.Client(daemon.address, route=bad)
+        assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT
+    assert proxima.ROUTE_HEADER == "x-proxima-route"
+
+
 def test_scene_lifecycle_and_numpy_results(client: proxima.Client) -> None:
     scene = client.create_scene([A, B], name="pair")
     try:

@@ -383,6 +383,10 @@ class ReviewSession:
             self.cancel()
 
 
+# The metadata key of Client's `route` (a load balancer's consistent-hash key).
+ROUTE_HEADER = "x-proxima-route"
+
+
 class Client:
     """A connection to proximad (a context manager).
 
@@ -396,6 +400,11 @@ class Client:
     - `tls_ca` (PEM root CA file; None: the system's roots), `tls_cert` and `tls_key` (this
       client's PEM certificate and key, mutual TLS), `tls_server_name` (the name the daemon's
       certificate must hold instead of the host): any of them makes the channel TLS
+    - `route`: the routing key for a load balancer in front of several daemons
+      (docs/deploy.md): every call carries `x-proxima-route: <route>`, so every call of one
+      scene reaches one daemon; choose it before creating the scene (its name, say) and use
+      one Client per route. None: a random key of this Client's own (`client-` and 16 hex
+      digits), and a review stream carries its room's name instead. The daemon ignores it.
     """
 
     def __init__(self, address: str, connect_timeout: float = 5.0,
@@ -403,7 +412,7 @@ class Client:
                  inline_mesh_bytes: int = 1 << 20, token: Optional[str] = None,
                  token_file: Optional[Union[str, Path]] = None, tls_ca: Optional[str] = None,
                  tls_cert: Optional[str] = None, tls_key: Optional[str] = None,
-                 tls_server_name: Optional[str] = None):
+                 tls_server_name: Optional[str] = None, route: Optional[str] = None):
         # Results of big scenes outgrow gRPC's 4 MiB default; the daemon's limits apply anyway.
         options: List[Tuple[str, Any]] = [("grpc.max_receive_message_length", -1),
                                           ("grpc.max_send_message_length", -1)]
@@ -415,7 +424,14 @@ class Client:
         if token is not None and (not token or any(not 0x20 <= ord(c) <= 0x7e for c in token)):
             raise ProximaError(grpc.StatusCode.INVALID_ARGUMENT,
                                "the token must be non-empty printable ASCII")
-        self._metadata = (("authorization", f"Bearer {token}"),) if token else None
+        if route is not None and (not route or any(not 0x20 <= ord(c) <= 0x7e for c in route)):
+            raise ProximaError(grpc.StatusCode.INVALID_ARGUMENT,
+                               "the route must be non-empty printable ASCII")
+        self._explicit_route = route is not None
+        self.route = route if route is not None else f"client-{os.urandom(8).hex()}"
+        self._auth: Tuple[Tuple[str, str], ...] = (
+            (("authorization", f"Bearer {token}"),) if token else ())
+        self._metadata = self._auth + ((ROUTE_HEADER, self.route),)
         tls = bool(tls_ca or tls_cert or tls_key or tls_server_name)
         if tls:
             if bool(tls_cert) != bool(tls_key):
@@ -566,5 +582,8 @@ class Client:
         """Joins review room `room` on `model` as `member` with `avatar` (in its own
         coordinates; poses place it). The ReviewSession; `timeout` bounds each wait for an
         answer (None: none)."""
-        return ReviewSession(self.stub, self._metadata, room, model, member, avatar, tolerance,
+        # A room's members must meet on one daemon: the room's name is their route.
+        metadata = (self._metadata if self._explicit_route
+                    else self._auth + ((ROUTE_HEADER, room),))
+        return ReviewSession(self.stub, metadata, room, model, member, avatar, tolerance,
                              nearest, timeout)
