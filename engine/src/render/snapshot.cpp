@@ -579,6 +579,63 @@ StatusOr<RenderResult> render(const Scene& scene, const Colouring& colouring,
     return result;
 }
 
+Status validate_snapshot_request(const SnapshotRequest& request) {
+    if (Status s = validate_size(request.render.width, request.render.height); !s.ok()) {
+        return s;
+    }
+    if (request.render.camera) {
+        if (Status s = validate_camera(*request.render.camera); !s.ok()) {
+            return s;
+        }
+    }
+    if (request.tolerance && !(std::isfinite(*request.tolerance) && *request.tolerance >= 0)) {
+        return invalid_argument("snapshot: the tolerance must be a finite number >= 0");
+    }
+    return Status::ok_status();
+}
+
+StatusOr<Snapshot> take_snapshot(ProximityEngine& engine, const SnapshotRequest& request,
+                                 const CancelToken* cancel) {
+    if (Status s = validate_snapshot_request(request); !s.ok()) {
+        return s;
+    }
+    QueryRequest query;
+    query.separation = request.segments;
+    query.collisions = request.collisions;
+    query.tolerance = request.tolerance;
+    QueryResult result;
+    if (query.separation || query.collisions || query.tolerance) {
+        auto answer = engine.query(query, cancel);
+        if (!answer.ok()) {
+            return answer.status();
+        }
+        result = std::move(answer).value();
+    }
+    ColourOptions colour_options;
+    colour_options.collisions = request.collisions;
+    colour_options.tolerance = request.tolerance.has_value();
+    colour_options.segments = request.segments;
+    const Colouring colouring = colour_results(engine.scene(), result, colour_options);
+    auto rendered = render(engine.scene(), colouring, request.render);
+    if (!rendered.ok()) {
+        return rendered.status();
+    }
+    auto png = encode_png(rendered->image);
+    if (!png.ok()) {
+        return png.status();
+    }
+    Snapshot out;
+    out.png = std::move(png).value();
+    out.camera = rendered->camera;
+    out.width = rendered->image.width;
+    out.height = rendered->image.height;
+    out.renderer = rendered->renderer;
+    out.collision_count = result.collisions.size();
+    out.tolerance_count = result.tolerance.size();
+    out.segment_count = colouring.segments.size();
+    return out;
+}
+
 StatusOr<std::string> encode_png(const Image& image) {
     if (image.width < 1 || image.height < 1 ||
         image.rgb.size() !=

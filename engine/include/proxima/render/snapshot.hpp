@@ -112,6 +112,34 @@ struct RenderResult {
 StatusOr<RenderResult> render(const Scene& scene, const Colouring& colouring,
                               const RenderOptions& options);
 
+// What a snapshot shows and how: the queries whose results colour it, and the image.
+struct SnapshotRequest {
+    RenderOptions render;
+    bool collisions = true;           // colliding triangles red
+    std::optional<double> tolerance;  // triangles of pairs within it amber (>= 0)
+    bool segments = true;             // separation's closest pairs as segments
+};
+
+struct Snapshot {
+    std::string png;
+    Camera camera;  // the camera used
+    int width = 0;
+    int height = 0;
+    std::string renderer;
+    std::size_t collision_count = 0;  // triangle pairs coloured red
+    std::size_t tolerance_count = 0;  // triangle pairs within the tolerance
+    std::size_t segment_count = 0;
+};
+
+// Checks the size, the camera (when set) and the tolerance without touching the scene or GL.
+Status validate_snapshot_request(const SnapshotRequest& request);
+
+// Runs the queries the colours need on `engine` (its culler state is reused), colours, renders
+// and encodes: the daemon's Snapshot call and `proxima snapshot` both come here, so the same
+// scene gives the same PNG bytes on the same renderer.
+StatusOr<Snapshot> take_snapshot(ProximityEngine& engine, const SnapshotRequest& request,
+                                 const CancelToken* cancel = nullptr);
+
 // PNG (8-bit RGB, no interlace) through libpng.
 StatusOr<std::string> encode_png(const Image& image);
 // For tests and tools: any 8-bit PNG libpng reads, converted to RGB.
