@@ -315,10 +315,11 @@ Status draw(const gpu::EglContext& context, const std::vector<Vertex>& triangles
     const auto stride = static_cast<GLsizei>(sizeof(Vertex));
     for (GLuint attribute = 0; attribute < 3; ++attribute) {
         rgl.glEnableVertexAttribArray(attribute);
-        rgl.glVertexAttribPointer(
-            attribute, 3, GL_FLOAT, GL_FALSE, stride,
-            reinterpret_cast<const void*>(static_cast<std::uintptr_t>(attribute) * 3 *
-                                          sizeof(float)));  // NOLINT(performance-no-int-to-ptr)
+        // A buffer offset, as GL passes it: a pointer-typed integer.
+        const std::uintptr_t offset = static_cast<std::uintptr_t>(attribute) * 3 * sizeof(float);
+        // NOLINTNEXTLINE(performance-no-int-to-ptr)
+        const auto* pointer = reinterpret_cast<const void*>(offset);
+        rgl.glVertexAttribPointer(attribute, 3, GL_FLOAT, GL_FALSE, stride, pointer);
     }
     gl.glUseProgram(objects.program);
     const double aspect = static_cast<double>(options.width) / options.height;
