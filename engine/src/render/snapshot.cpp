@@ -505,6 +505,12 @@ StatusOr<RenderResult> render(const Scene& scene, const Colouring& colouring,
                                     " triangles, its colours " + std::to_string(n));
         }
     }
+    if (scene.triangle_count() > MAX_SNAPSHOT_TRIANGLES) {
+        return Status(StatusCode::resource_exhausted, "snapshot: the scene has " +
+                                                          std::to_string(scene.triangle_count()) +
+                                                          " triangles; snapshots draw at most " +
+                                                          std::to_string(MAX_SNAPSHOT_TRIANGLES));
+    }
     if (egl_disabled()) {
         return Status(StatusCode::unavailable, "snapshot: EGL disabled by PROXIMA_DISABLE_EGL=" +
                                                    std::string(std::getenv("PROXIMA_DISABLE_EGL")));

@@ -10,6 +10,7 @@
 // the discrete-Voronoi backend's (its own thread), so a snapshot never disturbs culling.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -25,6 +26,8 @@ namespace proxima::render {
 // Largest image side and pixel count a snapshot may ask for.
 inline constexpr int MAX_SNAPSHOT_SIDE = 4096;
 inline constexpr std::int64_t MAX_SNAPSHOT_PIXELS = 4096LL * 4096LL;
+// Largest scene a snapshot draws (its vertex buffer takes 108 bytes a triangle).
+inline constexpr std::size_t MAX_SNAPSHOT_TRIANGLES = 10'000'000;
 
 struct Rgb {
     std::uint8_t r = 0;
@@ -107,8 +110,8 @@ struct RenderResult {
 };
 
 // Renders `scene` offscreen. `invalid_argument` for a bad size or camera or a colouring that does
-// not match the scene; `unavailable` when no EGL context can be created (or PROXIMA_DISABLE_EGL
-// is set); `internal` for a GL error.
+// not match the scene; `resource_exhausted` for more than MAX_SNAPSHOT_TRIANGLES; `unavailable`
+// when no EGL context can be created (or PROXIMA_DISABLE_EGL is set); `internal` for a GL error.
 StatusOr<RenderResult> render(const Scene& scene, const Colouring& colouring,
                               const RenderOptions& options);
 
