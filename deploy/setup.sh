@@ -21,7 +21,7 @@ packages=(
   libeigen3-dev libtbb-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev libassimp-dev libgmp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev libmetis-dev zlib1g-dev
-  libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev
+  libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libopengl-dev libgbm-dev libpng-dev
   libfcl-dev libbullet-dev
   python3 python3-grpcio python3-protobuf python3-numpy binutils
   # The Python package's tests: pytest, and a venv that pip installs the package into.

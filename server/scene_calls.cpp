@@ -1,5 +1,5 @@
 // The unary scene calls of ProximityService: CreateScene, DescribeScene, DeleteScene and Query
-// (one frame, answered once; frames.hpp runs it).
+// (one frame, answered once; frames.hpp runs it), and Snapshot (an offscreen PNG of a scene).
 #include <mutex>
 #include <string>
 #include <utility>
@@ -8,7 +8,9 @@
 
 #include "encode.hpp"
 #include "frames.hpp"
+#include "proxima/render/snapshot.hpp"
 #include "proxima/wire/buffers.hpp"
+#include "proxima/wire/snapshot.hpp"
 #include "scene_registry.hpp"
 #include "service.hpp"
 #include "service_internal.hpp"
@@ -135,6 +137,45 @@ grpc::ServerUnaryReactor* ProximityService::Query(grpc::CallbackServerContext* c
             }
             return s;
         }));
+    });
+    return call;
+}
+
+grpc::ServerUnaryReactor* ProximityService::Snapshot(grpc::CallbackServerContext* context,
+                                                     const v1::SnapshotRequest* request,
+                                                     v1::SnapshotResponse* response) {
+    auto* call = new UnaryCall(*m_shared, context, "Snapshot", request->scene_id());
+    if (call->refused()) {
+        return call;
+    }
+    // On a worker: it waits for the scene's mutex, runs the queries and renders. The renderer
+    // serializes every snapshot of the process on its own EGL context (one at a time), apart
+    // from the Voronoi culler's context thread.
+    m_shared->pool.submit([this, call, request, response] {
+        std::string extra;
+        Status s = guarded([&]() -> Status {
+            // Size, camera and tolerance first: a bad request is INVALID_ARGUMENT whatever the
+            // scene.
+            auto decoded = wire::decode_snapshot_request(*request);
+            if (!decoded.ok()) {
+                return decoded.status();
+            }
+            auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
+            if (!entry) {
+                return unknown_scene(request->scene_id());
+            }
+            std::lock_guard lock(entry->mutex);
+            auto snapshot = render::take_snapshot(entry->engine, *decoded, &call->cancel());
+            if (!snapshot.ok()) {
+                return snapshot.status();
+            }
+            wire::encode_snapshot(*snapshot, response);
+            extra = " width=" + std::to_string(snapshot->width) +
+                    " height=" + std::to_string(snapshot->height) +
+                    " png_bytes=" + std::to_string(snapshot->png.size());
+            return {};
+        });
+        call->complete(s, extra);
     });
     return call;
 }

@@ -1,6 +1,6 @@
 // ProximityService: the shared state of its calls (service_internal.hpp), the GPU backend,
 // metrics, the shutdown drain and GetServerInfo. Each kind of call has a file of its own:
-// scene_calls.cpp (CreateScene, DescribeScene, DeleteScene, Query), upload_stream.cpp
+// scene_calls.cpp (CreateScene, DescribeScene, DeleteScene, Query, Snapshot), upload_stream.cpp
 // (UploadObject), frame_stream.cpp (StreamFrames), model_calls.cpp (ListModels),
 // verify_stream.cpp (VerifyModel), review_stream.cpp (Review); the two bidirectional streams
 // share ordered_stream.hpp.

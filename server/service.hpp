@@ -42,6 +42,10 @@ class ProximityService final : public v1::Proximity::CallbackService {
         grpc::CallbackServerContext* context) override;
     grpc::ServerUnaryReactor* Query(grpc::CallbackServerContext* context, const v1::Frame* request,
                                     v1::FrameResult* response) override;
+    // An offscreen PNG of a scene (scene_calls.cpp; proxima/render/snapshot.hpp renders it).
+    grpc::ServerUnaryReactor* Snapshot(grpc::CallbackServerContext* context,
+                                       const v1::SnapshotRequest* request,
+                                       v1::SnapshotResponse* response) override;
 
     // Massive models, verification and review rooms (model_calls.cpp, verify_stream.cpp,
     // review_stream.cpp).

@@ -46,6 +46,10 @@ void add_massive_commands(CLI::App& app, int& exit_code);
 // proxima load: the load-test harness (clients/cli/load_command.cpp).
 void add_load_command(CLI::App& app, int& exit_code);
 
+// proxima snapshot: an offscreen PNG of mesh files, locally or on a daemon
+// (clients/cli/snapshot_command.cpp).
+void add_snapshot_command(CLI::App& app, int& exit_code);
+
 // --weld (merge identical positions in every file) as a WeldMode; without it only triangle soups
 // are welded (commands that read mesh files: distance, ccd).
 inline WeldMode weld_mode(bool weld) {

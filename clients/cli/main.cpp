@@ -702,6 +702,7 @@ int main(int argc, char** argv) {
         cli::add_massive_commands(app, command_exit);
         cli::add_play_command(app, command_exit);
         cli::add_load_command(app, command_exit);
+        cli::add_snapshot_command(app, command_exit);
 
         if (const int code = cli::parse_command_line(app, argc, argv); code >= 0) {
             return code;

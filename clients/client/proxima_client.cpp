@@ -25,6 +25,7 @@
 #include "proxima/wire/buffers.hpp"
 #include "proxima/wire/frames.hpp"
 #include "proxima/wire/massive.hpp"
+#include "proxima/wire/snapshot.hpp"
 #include "proxima/wire/status.hpp"
 
 namespace proxima::client {
@@ -696,6 +697,23 @@ StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRe
         return st;
     }
     return detail::decode_frame_response(result);
+}
+
+StatusOr<render::Snapshot> Client::snapshot(const std::string& scene_id,
+                                            const render::SnapshotRequest& request) {
+    pb::SnapshotRequest message;
+    wire::encode_snapshot_request(scene_id, request, &message);
+    pb::SnapshotResponse response;
+    // Snapshots change nothing: safe to repeat.
+    if (auto st = m_impl->unary("Snapshot", Retry::idempotent,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub_now()->Snapshot(&context, message,
+                                                                        &response);
+                                });
+        !st.ok()) {
+        return st;
+    }
+    return wire::decode_snapshot(response);
 }
 
 StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& scene_id) {

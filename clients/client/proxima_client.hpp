@@ -19,6 +19,7 @@
 #include "proxima/massive/verify.hpp"
 #include "proxima/query/penetration.hpp"
 #include "proxima/query/query.hpp"
+#include "proxima/render/snapshot.hpp"
 #include "proxima/scene.hpp"
 #include "proxima/status.hpp"
 
@@ -293,6 +294,9 @@ class Client {
     StatusOr<RemoteObject> upload_object(const std::string& scene_id, const NamedMesh& mesh);
     // One-shot frame (the Query RPC).
     StatusOr<FrameResponse> query(const std::string& scene_id, const FrameRequest& frame);
+    // An offscreen PNG of the scene, results coloured (the Snapshot RPC; the scene is unchanged).
+    StatusOr<render::Snapshot> snapshot(const std::string& scene_id,
+                                        const render::SnapshotRequest& request);
     // Opens a frame stream on an existing scene, or, with an empty scene_id, a stream-owned scene
     // created from the first frame's additions (deleted when the stream ends).
     StatusOr<std::unique_ptr<FrameStream>> open_stream(const std::string& scene_id);

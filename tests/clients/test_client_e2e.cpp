@@ -11,12 +11,14 @@
 #include <bit>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <thread>
 
 #include "client/proxima_client.hpp"
 #include "proxima/query/query.hpp"
+#include "proxima/render/snapshot.hpp"
 #include "support/random_scenes.hpp"
 
 namespace proxima::client {
@@ -368,7 +370,82 @@ TEST(ClientE2e, ErrorsKeepTheServersCodeAndMessage) {
 }  // namespace
 }  // namespace proxima::client
 
+namespace proxima::client {
+namespace {
+
+// Snapshot RPC: the daemon's PNG equals the in-process one (same scene, same queries, same
+// renderer: llvmpipe in CI), and bad requests get INVALID_ARGUMENT / NOT_FOUND.
+TEST(ClientE2e, SnapshotEqualsTheLocalRendering) {
+    std::vector<NamedMesh> objects;
+    objects.push_back({"a", test::box({0, 0, 0}, {1, 1, 1})});
+    objects.push_back({"b", test::box({0.5, 0.2, 0.2}, {1.5, 0.8, 0.8})});
+    objects.push_back({"c", test::box({4, 0, 0}, {5, 1, 1})});
+    render::SnapshotRequest request;
+    request.render.width = 160;
+    request.render.height = 90;
+    request.tolerance = 0.01;
+
+    ProximityEngine engine;
+    for (const auto& o : objects) {
+        ASSERT_TRUE(engine.scene().add_object(o).ok());
+    }
+    auto local = render::take_snapshot(engine, request);
+    if (local.status().code() == StatusCode::unavailable && std::getenv("CI") == nullptr) {
+        GTEST_SKIP() << "no EGL context here: " << local.status().message();
+    }
+    ASSERT_TRUE(local.ok()) << local.status().to_string();
+
+    auto c = connect_or_die();
+    ASSERT_NE(c, nullptr);
+    auto scene = c->create_scene("snapshot", objects);
+    ASSERT_TRUE(scene.ok()) << scene.status().to_string();
+    auto remote = c->snapshot(scene->scene_id, request);
+    ASSERT_TRUE(remote.ok()) << remote.status().to_string();
+    EXPECT_EQ(remote->width, 160);
+    EXPECT_EQ(remote->height, 90);
+    EXPECT_GT(remote->collision_count, 0u);
+    EXPECT_EQ(remote->collision_count, local->collision_count);
+    EXPECT_EQ(remote->segment_count, local->segment_count);
+    EXPECT_EQ(remote->camera.eye, local->camera.eye);
+    if (remote->renderer == local->renderer) {
+        EXPECT_TRUE(remote->png == local->png) << "the daemon's PNG differs from the local one";
+    }
+    auto decoded = render::decode_png(remote->png);
+    ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+    EXPECT_EQ(decoded->width, 160);
+    EXPECT_EQ(decoded->height, 90);
+
+    // A given camera comes back as used.
+    render::Camera camera;
+    camera.eye = {2.5, -10, 0.5};
+    camera.target = {2.5, 0, 0.5};
+    request.render.camera = camera;
+    auto framed = c->snapshot(scene->scene_id, request);
+    ASSERT_TRUE(framed.ok()) << framed.status().to_string();
+    EXPECT_EQ(framed->camera.eye, camera.eye);
+    EXPECT_EQ(framed->camera.up, (Vec3{0, 0, 1}));
+
+    request.render.camera.reset();
+    request.render.width = 0;
+    EXPECT_EQ(c->snapshot(scene->scene_id, request).status().code(), StatusCode::invalid_argument);
+    request.render.width = 5000;
+    request.render.height = 5000;
+    auto huge = c->snapshot(scene->scene_id, request);
+    EXPECT_EQ(huge.status().code(), StatusCode::invalid_argument);
+    EXPECT_NE(huge.status().message().find("5000x5000"), std::string::npos)
+        << huge.status().message();
+    request.render.width = 16;
+    request.render.height = 16;
+    EXPECT_EQ(c->snapshot("no-such-scene", request).status().code(), StatusCode::not_found);
+    EXPECT_TRUE(c->delete_scene(scene->scene_id).ok());
+}
+
+}  // namespace
+}  // namespace proxima::client
+
 int main(int argc, char** argv) {
+    // Mesa's shader cache stays out of $HOME (the daemon inherits this).
+    setenv("MESA_SHADER_CACHE_DISABLE", "true", 0);
     ::testing::InitGoogleTest(&argc, argv);
     ::testing::AddGlobalTestEnvironment(new proxima::client::DaemonEnvironment);
     return RUN_ALL_TESTS();

@@ -2,7 +2,9 @@
 culler against brute force, float32, CCD, penetration, streams and their cancellation, errors
 with their status codes, massive models (list, verify, review rooms)."""
 import json
+import os
 import re
+import struct
 import subprocess
 import threading
 import time
@@ -67,6 +69,34 @@ def test_scene_lifecycle_and_numpy_results(client: proxima.Client) -> None:
     with pytest.raises(proxima.ProximaError) as e:
         client.describe_scene(scene.scene_id)
     assert e.value.code == grpc.StatusCode.NOT_FOUND and e.value.code_name == "NOT_FOUND"
+
+
+def test_snapshot(client: proxima.Client) -> None:
+    """Snapshot: a PNG of the asked size; bad sizes are INVALID_ARGUMENT, an unknown scene
+    NOT_FOUND (the pixels are checked by tests/engine/render/test_snapshot.cpp)."""
+    scene = client.create_scene([A, B])
+    try:
+        try:
+            shot = client.snapshot(scene.scene_id, width=40, height=30, tolerance=0.6,
+                                   camera=((0.5, -8, 0.5), (0.5, 0, 0.5), None, 40))
+        except proxima.ProximaError as e:
+            if e.code_name == "UNAVAILABLE" and not os.environ.get("CI"):
+                pytest.skip(f"no EGL context here: {e.details}")
+            raise
+        assert shot.png[:8] == b"\x89PNG\r\n\x1a\n"
+        assert (shot.width, shot.height) == (40, 30)
+        assert struct.unpack(">II", shot.png[16:24]) == (40, 30)
+        assert shot.tolerance_count > 0 and shot.collision_count == 0
+        assert shot.camera.eye.y == -8 and shot.camera.up.z == 1
+        for w, h in ((0, 10), (5000, 10)):
+            with pytest.raises(proxima.ProximaError) as e:
+                client.snapshot(scene.scene_id, width=w, height=h)
+            assert e.value.code_name == "INVALID_ARGUMENT"
+    finally:
+        client.delete_scene(scene.scene_id)
+    with pytest.raises(proxima.ProximaError) as e:
+        client.snapshot("no-such-scene", width=8, height=8)
+    assert e.value.code_name == "NOT_FOUND"
 
 
 def test_errors_carry_the_status_code(client: proxima.Client) -> None:

@@ -23,6 +23,7 @@
 #include "proxima/wire/buffers.hpp"
 #include "proxima/wire/frames.hpp"
 #include "proxima/wire/massive.hpp"
+#include "proxima/wire/snapshot.hpp"
 #include "proxima/wire/status.hpp"
 #include "scene_registry.hpp"
 #include "support/random_scenes.hpp"
@@ -1061,6 +1062,77 @@ TEST(Wire, ModelListDecodes) {
     EXPECT_EQ(named.name_b, "b");
     EXPECT_EQ(bits(named.pair.distance), bits(1.0 / 3.0));
     EXPECT_EQ(named.pair.point_b.y, -0.5);
+}
+
+// Snapshot requests and answers: a round trip keeps every field; the daemon's decoding fills the
+// camera's defaults and refuses bad sizes, cameras and tolerances before any scene is looked at.
+TEST(Wire, SnapshotRoundTripAndValidation) {
+    render::SnapshotRequest request;
+    request.render.width = 320;
+    request.render.height = 200;
+    request.render.camera = render::Camera{{1, 2, 3}, {0, 0, 0}, {0, 1, 0}, 30};
+    request.collisions = false;
+    request.tolerance = 0.25;
+    request.segments = true;
+    v1::SnapshotRequest message;
+    wire::encode_snapshot_request("s1", request, &message);
+    EXPECT_EQ(message.scene_id(), "s1");
+    auto decoded = wire::decode_snapshot_request(message);
+    ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+    EXPECT_EQ(decoded->render.width, 320);
+    EXPECT_EQ(decoded->render.height, 200);
+    ASSERT_TRUE(decoded->render.camera.has_value());
+    EXPECT_EQ(decoded->render.camera->eye, (Vec3{1, 2, 3}));
+    EXPECT_EQ(decoded->render.camera->up, (Vec3{0, 1, 0}));
+    EXPECT_EQ(decoded->render.camera->fov_degrees, 30);
+    EXPECT_FALSE(decoded->collisions);
+    EXPECT_EQ(decoded->tolerance, 0.25);
+    EXPECT_TRUE(decoded->segments);
+
+    // Unset up and fov: +z and 45 degrees.
+    message.mutable_camera()->clear_up();
+    message.mutable_camera()->set_fov_degrees(0);
+    decoded = wire::decode_snapshot_request(message);
+    ASSERT_TRUE(decoded.ok());
+    EXPECT_EQ(decoded->render.camera->up, (Vec3{0, 0, 1}));
+    EXPECT_EQ(decoded->render.camera->fov_degrees, 45);
+
+    auto refused = [&](auto change) {
+        v1::SnapshotRequest bad = message;
+        change(bad);
+        return wire::decode_snapshot_request(bad).status().code();
+    };
+    EXPECT_EQ(refused([](auto& m) { m.set_width(0); }), StatusCode::invalid_argument);
+    EXPECT_EQ(refused([](auto& m) { m.set_height(4097); }), StatusCode::invalid_argument);
+    EXPECT_EQ(refused([](auto& m) { m.set_width(4'000'000'000U); }), StatusCode::invalid_argument);
+    EXPECT_EQ(refused([](auto& m) { m.set_tolerance(-1); }), StatusCode::invalid_argument);
+    EXPECT_EQ(refused([](auto& m) { m.mutable_camera()->set_fov_degrees(180); }),
+              StatusCode::invalid_argument);
+    EXPECT_EQ(refused([](auto& m) { *m.mutable_camera()->mutable_target() = m.camera().eye(); }),
+              StatusCode::invalid_argument);
+
+    render::Snapshot shot;
+    shot.png = "\x89PNG...";
+    shot.camera = *request.render.camera;
+    shot.width = 320;
+    shot.height = 200;
+    shot.renderer = "llvmpipe";
+    shot.collision_count = 3;
+    shot.tolerance_count = 4;
+    shot.segment_count = 5;
+    v1::SnapshotResponse response;
+    wire::encode_snapshot(shot, &response);
+    auto back = wire::decode_snapshot(response);
+    ASSERT_TRUE(back.ok()) << back.status().to_string();
+    EXPECT_EQ(back->png, shot.png);
+    EXPECT_EQ(back->camera.eye, shot.camera.eye);
+    EXPECT_EQ(back->width, 320);
+    EXPECT_EQ(back->renderer, "llvmpipe");
+    EXPECT_EQ(back->collision_count, 3U);
+    EXPECT_EQ(back->tolerance_count, 4U);
+    EXPECT_EQ(back->segment_count, 5U);
+    response.clear_png();
+    EXPECT_EQ(wire::decode_snapshot(response).status().code(), StatusCode::internal);
 }
 
 }  // namespace

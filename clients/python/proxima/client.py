@@ -536,6 +536,29 @@ class Client:
 
         return self._unary(self.stub.UploadObject, chunks())
 
+    def snapshot(self, scene_id: str, width: int = 800, height: int = 600,
+                 camera: Optional[Tuple[ArrayLike, ArrayLike, Optional[ArrayLike], float]] = None,
+                 collisions: bool = True, tolerance: Optional[float] = None,
+                 separation: bool = True) -> Any:
+        """Snapshot: an offscreen PNG of the scene, results coloured (collisions red, pairs within
+        `tolerance` amber, closest pairs as segments). `camera`: (eye, target, up or None, vertical
+        fov in degrees); None fits the scene. The SnapshotResponse (`png` bytes, `camera` used,
+        `width`, `height`, `gl_renderer`, `collision_count`, `tolerance_count`,
+        `segment_count`)."""
+        request = pb.SnapshotRequest(scene_id=scene_id, width=width, height=height,
+                                     collisions=collisions, separation=separation)
+        if tolerance is not None:
+            request.tolerance = tolerance
+        if camera is not None:
+            eye, target, up, fov = camera
+            vec = lambda v: pb.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa: E731
+            request.camera.eye.CopyFrom(vec(eye))
+            request.camera.target.CopyFrom(vec(target))
+            if up is not None:
+                request.camera.up.CopyFrom(vec(up))
+            request.camera.fov_degrees = float(fov)
+        return self._unary(self.stub.Snapshot, request)
+
     # --- frames ---------------------------------------------------------------------------
 
     def query(self, scene_id: str, **frame_args: Any) -> Result:
