@@ -32,6 +32,7 @@
 // loop.
 
 #include <netdb.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <unistd.h>
@@ -380,6 +381,16 @@ struct MetricsSample {
     std::size_t target = 0;
     std::array<std::optional<double>, SAMPLED.size()> values;
 };
+
+// This process's CPU time so far (user + system, every thread), seconds.
+double own_cpu_seconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    auto seconds = [](const timeval& t) {
+        return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) * 1e-6;
+    };
+    return seconds(u.ru_utime) + seconds(u.ru_stime);
+}
 
 // --- Recording ---------------------------------------------------------------------------------
 
@@ -1216,6 +1227,12 @@ void print_summary(const nlohmann::json& doc) {
                     number_text(s["cache_hits"], "%.0f").c_str(),
                     number_text(s["cache_misses"], "%.0f").c_str());
     }
+    const auto& h = doc["harness"];
+    std::printf("harness: %s threads, CPU %s s (%s cores), RSS max %s\n",
+                std::to_string(h["threads"].get<std::uint64_t>()).c_str(),
+                number_text(h["cpu_seconds"], "%.2f").c_str(),
+                number_text(h["cpu_cores"], "%.2f").c_str(),
+                client::format_amount(h["rss_bytes_max"].get<double>(), "bytes").c_str());
 }
 
 // --- Plot --------------------------------------------------------------------------------------
@@ -1558,6 +1575,11 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     const bool tty = isatty(fileno(stderr)) != 0;
     std::array<std::uint64_t, KIND_COUNT> before{};
     bool ended_by_count = false;
+    // The harness's own CPU over the measured part: from the first tick at or after the warm-up.
+    std::optional<std::pair<Clock::time_point, double>> cpu_from;
+    if (*warmup <= 0) {
+        cpu_from.emplace(sh.start, own_cpu_seconds());
+    }
     for (int second = 1;; ++second) {
         const auto tick = std::min(sh.end, sh.start + std::chrono::seconds(second));
         bool all_done = false;
@@ -1583,11 +1605,15 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
             std::fprintf(stderr, tty ? "\r%s\033[K" : "%s\n", line.c_str());
             std::fflush(stderr);
         }
+        if (!cpu_from && sh.since_start(tick) >= *warmup - 1e-6) {
+            cpu_from.emplace(tick, own_cpu_seconds());
+        }
         if (tick >= sh.end || all_done) {
             ended_by_count = all_done;
             break;
         }
     }
+    const auto cpu_to = std::make_pair(Clock::now(), own_cpu_seconds());
     {
         std::lock_guard lock(sh.mu);
         sh.stop = true;
@@ -1672,6 +1698,23 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     doc["kinds"] = kinds;
     doc["timeline"] = timeline_json(all, *duration);
     doc["metrics"] = metrics_json(targets, samples, scrape_failures, *warmup);
+    {
+        // The harness's share of the machine: CPU seconds per second of the measured part (a
+        // run that ended before the warm-up did has none).
+        nlohmann::json harness = {
+            {"threads", clients.total() + 1}, {"cpu_seconds", nullptr}, {"cpu_cores", nullptr}};
+        if (cpu_from) {
+            const double cpu = cpu_to.second - cpu_from->second;
+            const double wall =
+                std::chrono::duration<double>(cpu_to.first - cpu_from->first).count();
+            harness["cpu_seconds"] = cpu;
+            harness["cpu_cores"] = wall > 0 ? nlohmann::json(cpu / wall) : nlohmann::json(nullptr);
+        }
+        rusage u{};
+        getrusage(RUSAGE_SELF, &u);
+        harness["rss_bytes_max"] = static_cast<std::uint64_t>(u.ru_maxrss) * 1024U;
+        doc["harness"] = harness;
+    }
 
     if (!args.plot.empty()) {
         if (Status s = write_plot(doc, args.plot, gnuplot); !s.ok()) {

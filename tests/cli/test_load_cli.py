@@ -125,7 +125,8 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(doc["servers"], [self.address])
         self.assertEqual(doc["endReason"], "timeout")
         self.assertRegex(doc["date"], r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ$")
-        self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 1, "play": 0})
+        self.assertEqual(doc["clients"],
+                         {"sim": 2, "frames": 0, "review": 2, "verify": 1, "play": 0})
         self.assertEqual(doc["models"], ["plant"])
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
         for name, k in doc["kinds"].items():
@@ -140,6 +141,14 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(sum(s["kinds"].get("review_join", 0) for s in doc["timeline"]), 2)
         self.assertEqual(sum(s["count"] for s in doc["timeline"]),
                          doc["count"] + doc["warmup_count"])
+        # The harness's own share of the machine over the measured part: five client threads
+        # and the sampler, some CPU, less than every core of the machine at once.
+        h = doc["harness"]
+        self.assertEqual(h["threads"], 6)
+        self.assertGreater(h["cpu_seconds"], 0)
+        self.assertGreater(h["cpu_cores"], 0)
+        self.assertLess(h["cpu_cores"], os.cpu_count() + 0.5)
+        self.assertGreater(h["rss_bytes_max"], 1 << 20)
 
     def test_metrics_samples(self):
         doc = self.report()
