@@ -912,7 +912,11 @@ StatusOr<RegionSummary> Client::fetch_region(
         m_impl->options.retry, "FetchRegion", Retry::idempotent,
         [&] {
             grpc::ClientContext context;
-            m_impl->prepare(context, false);
+            // A room's view lives on the daemon its members meet on: the room's name is the
+            // route (as for join_review), unless the caller chose one.
+            m_impl->prepare(
+                context, false,
+                m_impl->explicit_route || region.room.empty() ? std::string() : region.room);
             if (timeout.count() > 0) {
                 context.set_deadline(deadline_after(timeout));
             }
