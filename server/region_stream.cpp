@@ -125,11 +125,13 @@ class RegionReactor final : public grpc::ServerWriteReactor<v1::RegionEvent> {
         std::shared_ptr<const massive::ModelView::Snapshot> snapshot;
         std::uint32_t object_count = static_cast<std::uint32_t>(store->objects().size());
         if (!request.room.empty()) {
-            // A room the token may not join answers like one that does not exist.
-            std::shared_ptr<Room> room;
-            if (who.may_join_room(request.room)) {
-                room = m_shared.rooms.find(request.room);
+            // The room's access, as for joining it (Review).
+            if (!who.may_join_room(request.room)) {
+                return {StatusCode::permission_denied,
+                        "token '" + who.name() + "' may not see review room '" + request.room +
+                            "' (no pattern of its rooms matches)"};
             }
+            const std::shared_ptr<Room> room = m_shared.rooms.find(request.room);
             if (!room) {
                 return not_found("room " + request.room +
                                  " does not exist (a room lives while it has members)");
