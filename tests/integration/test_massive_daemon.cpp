@@ -1264,5 +1264,37 @@ TEST_F(MassiveDaemon, FetchRegionStopsOnCancelAndDeadline) {
     EXPECT_EQ(again->pieces, store->summary().pieces);
 }
 
+TEST_F(MassiveDaemon, FetchRegionStalledReaderDoesNotHoldUpOthers) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    // A reader that takes one event and stops: the daemon waits for it (bounded), nothing else.
+    auto stub = make_stub(daemon.address());
+    grpc::ClientContext stalled;
+    deadline_in(stalled, 30s);
+    v1::FetchRegionRequest request;
+    request.set_model("plant");
+    request.set_type(v1::SCALAR_TYPE_FLOAT64);
+    auto reader = stub->FetchRegion(&stalled, request);
+    v1::RegionEvent first;
+    ASSERT_TRUE(reader->Read(&first));
+    EXPECT_TRUE(first.has_piece());
+    // Meanwhile other calls are answered in full.
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    for (int k = 0; k < 3; ++k) {
+        auto other = c->fetch_region({"plant"});
+        ASSERT_TRUE(other.ok()) << other.status().to_string();
+        EXPECT_EQ(other->pieces, store->summary().pieces);
+    }
+    auto list = c->list_models();
+    ASSERT_TRUE(list.ok()) << list.status().to_string();
+    stalled.TryCancel();
+    while (reader->Read(&first)) {
+    }
+    EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
+}
+
 }  // namespace
 }  // namespace proxima::test
