@@ -28,6 +28,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -172,9 +173,24 @@ struct VerifyArgs {
     double tolerance = 0.0;
     std::string cache_bytes;
     bool brute_force = false;
+    std::string shard;               // "I/N"
+    std::vector<std::string> merge;  // shard outputs
+    bool reproducible = false;
+    bool tolerance_given = false;
     JsonOutput output;
     bool quiet = false;
 };
+
+// The stats fields that vary from run to run (timings, the cache's counters, whether the
+// schedule was read from the store): --reproducible leaves them out, so that the output depends
+// on the store, the tolerance and the cache budget alone, and a merge of shards equals a single
+// run byte for byte (docs/massive.md, "Shards").
+void drop_run_fields(nlohmann::json& stats) {
+    for (const char* key :
+         {"plan_seconds", "seconds", "wall_seconds", "schedule_from_store", "cache"}) {
+        stats.erase(key);
+    }
+}
 
 nlohmann::json pair_json(const massive::ObjectPairResult& p, const std::string& name_a,
                          const std::string& name_b) {
@@ -273,6 +289,237 @@ int run_verify_local(const VerifyArgs& args, std::uint64_t cache_bytes) {
         doc["stats"] = verify_stats_json(stats.value());
         doc["stats"]["wall_seconds"] = seconds_since(start);
     }
+    if (args.reproducible) {
+        drop_run_fields(doc["stats"]);
+    }
+    doc["pairs"] = found.json();
+    return emit_json(doc, args.output, verify_summary(doc));
+}
+
+// Shard I/N: the I-th of N work-balanced groups of the schedule's subgraphs, in this process.
+int run_verify_shard(const VerifyArgs& args, std::uint64_t cache_bytes, std::uint32_t index,
+                     std::uint32_t count) {
+    auto opened = massive::Store::open(args.store);
+    if (!opened.ok()) {
+        return fail(opened.status());
+    }
+    const std::shared_ptr<const massive::Store> store = opened.value();
+    const auto& objects = store->objects();
+    massive::GeometryCache cache(cache_bytes);
+    client::ProgressPrinter printer(args.quiet);
+    massive::VerifyOptions options;
+    options.tolerance = args.tolerance;
+    std::vector<massive::ShardPair> pairs;
+    massive::ShardStats shard;
+    const auto start = Clock::now();
+    auto stats = massive::verify_shard(store, cache, options, index, count, &pairs, &shard,
+                                       printer.callback());
+    printer.finish();
+    if (!stats.ok()) {
+        return fail(stats.status());
+    }
+    nlohmann::json doc = {{"store", args.store},
+                          {"generation", store->summary().generation},
+                          {"tolerance", args.tolerance},
+                          {"cache_bytes", cache_bytes},
+                          {"method", "static"},
+                          {"shard",
+                           {{"index", shard.index},
+                            {"count", shard.count},
+                            {"subgraph_count", shard.subgraphs},
+                            {"piece_pair_count", shard.edges},
+                            {"work", shard.work}}}};
+    doc["stats"] = verify_stats_json(stats.value());
+    doc["stats"]["wall_seconds"] = seconds_since(start);
+    if (args.reproducible) {
+        drop_run_fields(doc["stats"]);
+    }
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& p : pairs) {
+        auto j = pair_json(p.pair, objects[p.pair.object_a].name, objects[p.pair.object_b].name);
+        j["squared_distance"] = p.squared_distance;
+        out.push_back(std::move(j));
+    }
+    doc["pairs"] = std::move(out);
+    return emit_json(doc, args.output,
+                     "verify shard " + std::to_string(index) + "/" + std::to_string(count) + ": " +
+                         std::to_string(pairs.size()) + " object pairs within " +
+                         doc["tolerance"].dump());
+}
+
+StatusOr<Vec3> point_from_json(const nlohmann::json& j) {
+    if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() ||
+        !j[2].is_number()) {
+        return invalid_argument("a point is not [x, y, z]");
+    }
+    return Vec3{j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
+}
+
+// --merge FILE...: the shards' outputs combined into the single run's output.
+int run_verify_merge(const VerifyArgs& args) {
+    struct Shard {
+        std::string file;
+        nlohmann::json doc;
+    };
+    std::vector<Shard> shards;
+    for (const auto& file : args.merge) {
+        std::ifstream in(file, std::ios::binary);
+        if (!in) {
+            return fail(not_found("--merge: cannot read '" + file + "'"));
+        }
+        nlohmann::json doc = nlohmann::json::parse(in, nullptr, false);
+        if (doc.is_discarded() || !doc.is_object()) {
+            return fail(invalid_argument("--merge: '" + file + "' is not JSON"));
+        }
+        if (!doc.contains("shard") || !doc["shard"].is_object() ||
+            !doc["shard"].contains("index") || !doc["shard"].contains("count") ||
+            !doc["shard"]["index"].is_number_unsigned() ||
+            !doc["shard"]["count"].is_number_unsigned() || doc["shard"]["count"] == 0 ||
+            !doc.contains("pairs") || !doc["pairs"].is_array() || !doc.contains("stats") ||
+            !doc["stats"].is_object()) {
+            return fail(invalid_argument("--merge: '" + file +
+                                         "' is not the output of proxima verify --shard I/N"));
+        }
+        shards.push_back({file, std::move(doc)});
+    }
+    const auto& first = shards.front();
+    const auto count = first.doc["shard"]["count"].get<std::uint64_t>();
+    // Every shard must be of the same run: model, generation, tolerance, cache budget, N.
+    for (const auto& s : shards) {
+        for (const char* key : {"store", "generation", "tolerance", "cache_bytes"}) {
+            if (s.doc.value(key, nlohmann::json()) != first.doc.value(key, nlohmann::json())) {
+                return fail(failed_precondition(
+                    std::string("--merge: the shards are of different runs: '") + first.file +
+                    "' has " + key + " " + first.doc.value(key, nlohmann::json()).dump() + ", '" +
+                    s.file + "' has " + s.doc.value(key, nlohmann::json()).dump()));
+            }
+        }
+        if (s.doc["shard"]["count"].get<std::uint64_t>() != count) {
+            return fail(failed_precondition("--merge: the shards are of different runs: '" +
+                                            first.file + "' is one of " + std::to_string(count) +
+                                            " shards, '" + s.file + "' one of " +
+                                            s.doc["shard"]["count"].dump()));
+        }
+        for (const char* key : {"object_count", "piece_count", "triangle_count", "subgraph_count",
+                                "piece_pair_count", "object_pair_count"}) {
+            if (s.doc["stats"].value(key, nlohmann::json()) !=
+                first.doc["stats"].value(key, nlohmann::json())) {
+                return fail(failed_precondition(std::string("--merge: the shards disagree on ") +
+                                                "stats." + key + ": '" + first.file + "' and '" +
+                                                s.file + "'"));
+            }
+        }
+    }
+    std::vector<std::string> seen(count);
+    for (const auto& s : shards) {
+        const auto i = s.doc["shard"]["index"].get<std::uint64_t>();
+        if (i >= count) {
+            return fail(invalid_argument("--merge: '" + s.file + "' says shard " +
+                                         std::to_string(i) + " of " + std::to_string(count)));
+        }
+        if (!seen[i].empty()) {
+            return fail(invalid_argument("--merge: shard " + std::to_string(i) + "/" +
+                                         std::to_string(count) + " given twice: '" + seen[i] +
+                                         "' and '" + s.file + "'"));
+        }
+        seen[i] = s.file;
+    }
+    std::string missing;
+    for (std::size_t i = 0; i < count; ++i) {
+        if (seen[i].empty()) {
+            missing += (missing.empty() ? "" : ", ") + std::to_string(i);
+        }
+    }
+    if (!missing.empty()) {
+        return fail(failed_precondition("--merge: shard(s) " + missing + " of " +
+                                        std::to_string(count) + " missing"));
+    }
+    // The pairs, and their names (an object's name is the same in every shard).
+    std::vector<std::vector<massive::ShardPair>> all;
+    std::map<std::uint32_t, std::string> names;
+    for (const auto& s : shards) {
+        auto& list = all.emplace_back();
+        for (const auto& j : s.doc["pairs"]) {
+            massive::ShardPair p;
+            try {
+                p.pair.object_a = j.at("object").get<std::uint32_t>();
+                p.pair.object_b = j.at("other").get<std::uint32_t>();
+                p.pair.triangle_a = j.at("triangle").get<std::uint32_t>();
+                p.pair.triangle_b = j.at("other_triangle").get<std::uint32_t>();
+                p.pair.distance = j.at("distance").get<double>();
+                p.squared_distance = j.at("squared_distance").get<double>();
+                auto a = point_from_json(j.at("point"));
+                auto b = point_from_json(j.at("other_point"));
+                if (!a.ok() || !b.ok()) {
+                    return fail(invalid_argument("--merge: '" + s.file +
+                                                 "': " + (a.ok() ? b : a).status().message()));
+                }
+                p.pair.point_a = a.value();
+                p.pair.point_b = b.value();
+                names[p.pair.object_a] = j.at("name").get<std::string>();
+                names[p.pair.object_b] = j.at("other_name").get<std::string>();
+            } catch (const nlohmann::json::exception& e) {
+                return fail(invalid_argument("--merge: '" + s.file + "': a pair is malformed (" +
+                                             e.what() + ")"));
+            }
+            list.push_back(p);
+        }
+    }
+    NamedPairs found;
+    for (const auto& p : massive::merge_shard_pairs(all)) {
+        found.pairs.push_back(p);
+        found.names.emplace_back(names[p.object_a], names[p.object_b]);
+    }
+    // The single run's document: same keys; counts of the whole model from any shard, the
+    // shards' exact tests summed, their run fields combined (timings: the slowest shard; cache
+    // counters: summed, peak: the largest).
+    nlohmann::json stats = first.doc["stats"];
+    stats["pair_count"] = found.pairs.size();
+    std::uint64_t exact = 0;
+    for (const auto& s : shards) {
+        exact += s.doc["stats"].value("exact_tests", std::uint64_t{0});
+    }
+    stats["exact_tests"] = exact;
+    if (!args.reproducible && stats.contains("seconds")) {
+        for (const auto& s : shards) {
+            const auto& st = s.doc["stats"];
+            for (const char* key : {"plan_seconds", "seconds", "wall_seconds"}) {
+                stats[key] = std::max(stats.value(key, 0.0), st.value(key, 0.0));
+            }
+            stats["schedule_from_store"] =
+                stats.value("schedule_from_store", true) && st.value("schedule_from_store", true);
+        }
+        if (stats.contains("cache")) {
+            auto& cache = stats["cache"];
+            for (auto it = cache.begin(); it != cache.end(); ++it) {
+                const std::string& key = it.key();
+                if (key == "budget_bytes" || !it.value().is_number()) {
+                    continue;
+                }
+                const bool largest = key == "peak_bytes" || key == "resident_bytes";
+                double combined = 0;
+                for (const auto& s : shards) {
+                    const double v = s.doc["stats"]["cache"].value(key, 0.0);
+                    combined = largest ? std::max(combined, v) : combined + v;
+                }
+                if (it.value().is_number_float()) {
+                    it.value() = combined;
+                } else {
+                    it.value() = static_cast<std::uint64_t>(combined);
+                }
+            }
+        }
+    } else {
+        drop_run_fields(stats);
+    }
+    if (args.reproducible) {
+        drop_run_fields(stats);
+    }
+    nlohmann::json doc = {{"store", first.doc["store"]},
+                          {"generation", first.doc["generation"]},
+                          {"tolerance", first.doc["tolerance"]},
+                          {"method", "static"}};
+    doc["stats"] = std::move(stats);
     doc["pairs"] = found.json();
     return emit_json(doc, args.output, verify_summary(doc));
 }
@@ -311,6 +558,12 @@ int run_verify_remote(const VerifyArgs& args) {
 }
 
 int run_verify(const VerifyArgs& args) {
+    if (!args.merge.empty()) {
+        return run_verify_merge(args);
+    }
+    if (!args.tolerance_given) {
+        return fail(invalid_argument("--tolerance is required (except with --merge)"));
+    }
     if (!std::isfinite(args.tolerance) || args.tolerance < 0) {
         return fail(invalid_argument("--tolerance must be a finite distance >= 0"));
     }
@@ -333,6 +586,22 @@ int run_verify(const VerifyArgs& args) {
             return fail(v.status());
         }
         cache_bytes = v.value();
+    }
+    if (!args.shard.empty()) {
+        // I/N with 0 <= I < N.
+        unsigned index = 0;
+        unsigned count = 0;
+        char tail = 0;
+        if (std::sscanf(args.shard.c_str(), "%u/%u%c", &index, &count, &tail) != 2 || count == 0 ||
+            index >= count || args.shard.find('-') != std::string::npos) {
+            return fail(invalid_argument("--shard '" + args.shard +
+                                         "': expected I/N with 0 <= I < N (e.g. 0/3)"));
+        }
+        if (args.brute_force) {
+            return fail(
+                invalid_argument("--shard splits the static verification, not --brute-force"));
+        }
+        return run_verify_shard(args, cache_bytes, index, count);
     }
     return run_verify_local(args, cache_bytes);
 }
@@ -790,11 +1059,11 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     add_server_flags(*verify, verify_args->server_flags, server_opt);
     verify->add_option("--model", verify_args->model, "With --server: the model's name")
         ->needs(server_opt);
-    verify
-        ->add_option("--tolerance", verify_args->tolerance,
-                     "Report object pairs within this distance (0: touching or intersecting)")
-        ->check(non_negative_number())
-        ->required();
+    auto* tolerance_opt =
+        verify
+            ->add_option("--tolerance", verify_args->tolerance,
+                         "Report object pairs within this distance (0: touching or intersecting)")
+            ->check(non_negative_number());
     verify
         ->add_option("--cache-bytes", verify_args->cache_bytes,
                      "With --store: the cache budget (default 160M)")
@@ -804,11 +1073,32 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
         ->add_flag("--brute-force", verify_args->brute_force,
                    "With --store: every object pair with everything in memory (the reference)")
         ->needs(store_opt);
+    verify
+        ->add_option("--shard", verify_args->shard,
+                     "With --store: run only shard I of N (the I-th of N work-balanced groups of "
+                     "the model's localized subgraphs, I from 0) and write a shard output for "
+                     "--merge")
+        ->type_name("I/N")
+        ->needs(store_opt);
+    verify
+        ->add_option("--merge", verify_args->merge,
+                     "Combine the outputs of every shard of one run (--shard I/N, I = 0 .. "
+                     "N-1) into exactly the single run's output")
+        ->type_name("FILE...")
+        ->excludes(store_opt)
+        ->excludes(server_opt)
+        ->excludes(tolerance_opt);
+    verify->add_flag("--reproducible", verify_args->reproducible,
+                     "Leave out the fields that vary from run to run (stats: plan_seconds, "
+                     "seconds, wall_seconds, schedule_from_store, cache)");
     add_json_output(*verify, verify_args->output, true);
     verify->add_flag("--quiet", verify_args->quiet, "No progress on standard error");
-    verify->callback([verify, verify_args, &exit_code] {
-        if (verify_args->store.empty() && verify_args->server.empty()) {
-            exit_code = usage_error(*verify, "verify needs --store DIR or --server ADDR");
+    verify->callback([verify, verify_args, tolerance_opt, &exit_code] {
+        verify_args->tolerance_given = tolerance_opt->count() > 0;
+        if (verify_args->store.empty() && verify_args->server.empty() &&
+            verify_args->merge.empty()) {
+            exit_code = usage_error(
+                *verify, "verify needs --store DIR or --server ADDR (or --merge FILE...)");
             return;
         }
         exit_code = run_verify(*verify_args);

@@ -39,6 +39,7 @@ struct PlayArgs {
     double fps = 0.0;
     bool as_fast = false;
     std::size_t in_flight = 1;
+    bool resilient = false;
     std::vector<std::string> queries{"separation"};
     double tolerance = -1.0;
     double ccd_min_distance = 0.0;
@@ -202,7 +203,7 @@ void print_frame(const client::SequenceFrame& frame, const client::PlayedFrame& 
     std::fflush(stdout);
 }
 
-std::string summary_text(const client::PlayReport& r) {
+std::string summary_text(const client::PlayReport& r, bool resilient) {
     std::vector<double> latency;
     std::size_t late = 0;
     for (const auto& f : r.frames) {
@@ -216,7 +217,14 @@ std::string summary_text(const client::PlayReport& r) {
                   "p99 %.2f ms, max %.2f ms; scene set up in %.1f ms; %zu frames sent late",
                   r.frames.size(), r.topology_changes, r.wall_ms, s.median, s.p99, s.max,
                   r.setup_ms, late);
-    return buf;
+    std::string text = buf;
+    if (resilient) {
+        text += "; scene re-created " + std::to_string(r.recreations) + " times";
+        for (const auto& cause : r.recreation_causes) {
+            text += " (after " + cause + ")";
+        }
+    }
+    return text;
 }
 
 int run_play(const PlayArgs& args) {
@@ -262,6 +270,7 @@ int run_play(const PlayArgs& args) {
     options.fps = args.as_fast ? 0.0 : args.fps > 0.0 ? args.fps : seq.fps;
     options.keep_results = false;
     options.in_flight = args.in_flight;
+    options.resilient = args.resilient;
     // With --culler voronoi-gpu a local engine starts its own headless EGL context (as the daemon
     // does once at start-up); without one the frames fail with EGL's reason.
     options.prepare_engine = [&](ProximityEngine& engine) {
@@ -330,10 +339,10 @@ int run_play(const PlayArgs& args) {
         return fail(report.status());
     }
     if (sink != nullptr) {
-        std::fprintf(stderr, "%s; JSON in %s\n", summary_text(report.value()).c_str(),
-                     args.output.out.c_str());
+        std::fprintf(stderr, "%s; JSON in %s\n",
+                     summary_text(report.value(), args.resilient).c_str(), args.output.out.c_str());
     } else if (!json) {
-        std::printf("%s\n", summary_text(report.value()).c_str());
+        std::printf("%s\n", summary_text(report.value(), args.resilient).c_str());
     }
     return 0;
 }
@@ -369,6 +378,10 @@ void add_play_command(CLI::App& app, int& exit_code) {
                     "daemon's max_frames_in_flight); 1 is lockstep")
         ->check(whole_number(1, 1024))
         ->capture_default_str()
+        ->needs(server_opt);
+    cmd->add_flag("--resilient", args->resilient,
+                  "With --server: re-create the scene (and re-send the frames in flight) when "
+                  "the daemon goes away, e.g. on another daemon behind HAProxy")
         ->needs(server_opt);
     cmd->add_option("--query", args->queries,
                     "Comma-separated: separation, self, collisions, tolerance, ccd")

@@ -1199,6 +1199,42 @@ void ReviewSession::cancel() {
 
 // --- ResilientScene --------------------------------------------------------------------------
 
+namespace {
+
+// Whether a frame stream's failure means "the daemon went away": UNAVAILABLE (a direct connection
+// broke), CANCELLED that this client did not ask for, or UNKNOWN without any gRPC status (the
+// HTTP/2 stream ended with no grpc-status: gRPC reports "No status received" or "Stream
+// removed"). A ResilientScene's stream has no deadline, and the session cancels it only when it
+// ends (after which nothing recovers), so any CANCELLED it sees comes from between: behind HAProxy
+// a killed backend's stream ends with "Received RST_STREAM with error code 8" (CANCELLED) or
+// without a status (UNKNOWN), not UNAVAILABLE (docs/deploy.md). A daemon's own UNKNOWN always
+// carries its status, so it is not taken for one.
+bool daemon_gone(const Status& status) {
+    switch (status.code()) {
+        case StatusCode::unavailable:
+        case StatusCode::cancelled:
+            return true;
+        default: {
+            // UNKNOWN reaches the engine's codes as internal, "gRPC UNKNOWN: message" (from_grpc).
+            std::string name;
+            std::string rest;
+            return split_grpc_prefix(status, &name, &rest) && name == "UNKNOWN" &&
+                   (rest == "No status received" || rest == "Stream removed");
+        }
+    }
+}
+
+// The same failure as UNAVAILABLE, so the recovery's retry policy treats it as one.
+Status as_unavailable(const Status& status) {
+    if (!daemon_gone(status) || status.code() == StatusCode::unavailable) {
+        return status;
+    }
+    return {StatusCode::unavailable,
+            "the stream ended on the way, not by this client or the daemon: " + status.message()};
+}
+
+}  // namespace
+
 struct ResilientScene::Impl {
     // One object of the session's copy of the scene, in result order.
     struct Tracked {
@@ -1477,7 +1513,7 @@ struct ResilientScene::Impl {
                     return wire.status();
                 }
                 if (auto st = stream->send(wire.value()); !st.ok()) {
-                    return st;
+                    return as_unavailable(st);
                 }
             }
             return Status();
@@ -1586,8 +1622,9 @@ Status ResilientScene::send(const FrameRequest& frame) {
     if (sent.ok()) {
         return {};
     }
-    if (sent.code() == StatusCode::unavailable) {
-        s.recover(sent);  // re-sends this frame too, or ends the session with its outcome
+    if (daemon_gone(sent)) {
+        s.recover(
+            as_unavailable(sent));  // re-sends this frame too, or ends the session with its outcome
         return {};
     }
     // The daemon ended the stream for another reason (an earlier frame rejected, a quota):
@@ -1623,8 +1660,8 @@ StatusOr<FrameResponse> ResilientScene::receive() {
         if (r.ok()) {
             return s.accept(std::move(r).value());
         }
-        if (r.status().code() == StatusCode::unavailable) {
-            s.recover(r.status());
+        if (daemon_gone(r.status())) {
+            s.recover(as_unavailable(r.status()));
             continue;
         }
         // A rejected frame (or any other error) ends the stream: this frame gets the status,

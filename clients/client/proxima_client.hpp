@@ -425,14 +425,17 @@ struct ResilientSceneOptions {
 
 // A scene on the daemon with a frame stream that survives the daemon going away. It remembers
 // what it sent (object names, topologies, latest positions: its own copy of the scene as of the
-// last answered frame), and when the stream fails with UNAVAILABLE it reconnects with backoff,
+// last answered frame), and when the stream fails with UNAVAILABLE, or with a CANCELLED it did not
+// ask for (behind HAProxy a killed daemon's stream ends "RST_STREAM error code 8", CANCELLED; the
+// session's stream has no deadline and is cancelled only when the session ends), it reconnects
+// with backoff,
 // re-creates the scene from that copy on a new daemon scene (deleting the old one if it still
 // exists), re-sends the frames that were in flight, once, and goes on. Every frame sent gets
 // exactly one outcome from receive(), in order: its response (recreated_scene marks the first one
 // after a re-creation) or an error; none is applied twice to the scene the caller sees, none
 // dropped. Object ids are the session's: the first scene's ids, and when a re-created scene
-// numbers objects differently the session translates, so the caller's ids stay valid. Errors
-// other than UNAVAILABLE end the session like a FrameStream's; so does the daemon going away
+// numbers objects differently the session translates, so the caller's ids stay valid. Other
+// errors end the session like a FrameStream's; so does the daemon going away
 // again before answering a re-sent frame, or running out of recovery attempts. The Client must
 // outlive the session; not thread-safe.
 class ResilientScene {

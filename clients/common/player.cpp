@@ -4,7 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <string>
 #include <thread>
 #include <utility>
@@ -256,18 +258,56 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
     for (const auto& o : sequence.frames[0].objects) {
         meshes.push_back(o.mesh);
     }
-    auto scene = client.create_scene("proxima play " + sequence.dir, meshes);
-    if (!scene.ok()) {
-        return scene.status();
+    // The frames go to a plain FrameStream or, with options.resilient, to a ResilientScene; the
+    // rest of the run is the same (both keep their ids as the caller's).
+    std::function<Status(const FrameRequest&)> send_frame;
+    std::function<StatusOr<FrameResponse>()> receive_frame;
+    std::function<Status()> finish_frames;
+    std::vector<ObjectId> ids;
+    std::string scene_id;
+    std::unique_ptr<ResilientScene> resilient;
+    std::unique_ptr<FrameStream> plain;
+    if (options.resilient) {
+        ResilientSceneOptions ropts;
+        ropts.on_recreated = [&](const SceneRecreation& r) {
+            report.recreation_causes.push_back(std::string(status_code_name(r.cause.code())) +
+                                               ": " + r.cause.message());
+        };
+        auto created = ResilientScene::create(client, "proxima play " + sequence.dir, meshes,
+                                              std::move(ropts));
+        if (!created.ok()) {
+            return created.status();
+        }
+        resilient = std::move(created).value();
+        ids = resilient->object_ids();
+        send_frame = [&](const FrameRequest& f) { return resilient->send(f); };
+        receive_frame = [&] { return resilient->receive(); };
+        finish_frames = [&] {
+            report.recreations = resilient->recreations();
+            return resilient->finish();  // deletes the (current) scene too
+        };
+    } else {
+        auto scene = client.create_scene("proxima play " + sequence.dir, meshes);
+        if (!scene.ok()) {
+            return scene.status();
+        }
+        scene_id = scene->scene_id;
+        for (const auto& o : scene->objects) {
+            ids.push_back(o.id);
+        }
     }
     report.setup_ms = ms_between(setup, Clock::now());
-    const std::string scene_id = scene->scene_id;
     // The scene is deleted however the run ends; a failed delete is left to the daemon's idle
-    // expiry (the answer, or the run's own error, is what the caller needs).
+    // expiry (the answer, or the run's own error, is what the caller needs). A ResilientScene
+    // deletes its own.
     struct DeleteScene {
         Client& c;
         const std::string& id;
-        ~DeleteScene() { (void)c.delete_scene(id); }
+        ~DeleteScene() {
+            if (!id.empty()) {
+                (void)c.delete_scene(id);
+            }
+        }
     } delete_scene{client, scene_id};
     if (options.on_setup) {
         if (Status st = options.on_setup(report.setup_ms); !st.ok()) {
@@ -275,18 +315,19 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         }
     }
 
-    std::vector<ObjectId> ids;
-    for (const auto& o : scene->objects) {
-        ids.push_back(o.id);
-    }
     if (Status st = check_ids(ids, sequence.frames[0], 0, "the daemon's scene"); !st.ok()) {
         return st;
     }
-    auto stream = client.open_stream(scene_id);
-    if (!stream.ok()) {
-        return stream.status();
+    if (!options.resilient) {
+        auto stream = client.open_stream(scene_id);
+        if (!stream.ok()) {
+            return stream.status();
+        }
+        plain = std::move(stream).value();
+        send_frame = [&](const FrameRequest& f) { return plain->send(f); };
+        receive_frame = [&] { return plain->receive(); };
+        finish_frames = [&] { return plain->finish(); };
     }
-    auto& frames = *stream.value();
     auto broken = [&](const Status& st, std::size_t k) {
         return Status(st.code(), st.message() + " (stream to the daemon broke at frame " +
                                      std::to_string(k) + ")");
@@ -313,7 +354,7 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         Pending p = std::move(pending.front());
         pending.pop_front();
         const std::size_t k = p.frame.index;
-        auto response = frames.receive();
+        auto response = receive_frame();
         p.frame.latency_ms = ms_between(p.sent, Clock::now());
         if (!response.ok()) {
             return broken(response.status(), k);
@@ -340,7 +381,7 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         PlayedFrame played = driver.start_frame(k, topology_change);
         played.late_ms = driver.pace(k);
         const auto sent = Clock::now();
-        if (Status st = frames.send(frame); !st.ok()) {
+        if (Status st = send_frame(frame); !st.ok()) {
             // The stream may have ended on an earlier frame's error: that one is the cause.
             while (!pending.empty()) {
                 if (Status earlier = receive_one(); !earlier.ok()) {
@@ -356,7 +397,7 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
             return st;
         }
     }
-    if (Status st = frames.finish(); !st.ok()) {
+    if (Status st = finish_frames(); !st.ok()) {
         return broken(st, sequence.frames.size());
     }
     return report;

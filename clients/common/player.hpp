@@ -15,6 +15,7 @@
 #include <cstddef>
 #include <functional>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "client/proxima_client.hpp"
@@ -40,6 +41,9 @@ struct PlayOptions {
     // max_frames_in_flight; 1 is lockstep. A frame after a topology change waits for that frame's
     // answer (the new objects' ids). Latency is then send to answer, queueing included.
     std::size_t in_flight = 1;
+    // play_remote: run the frames on a ResilientScene, which re-creates the scene (on another
+    // daemon behind HAProxy) when its daemon goes away, and re-sends the frames in flight.
+    bool resilient = false;
     // Keep every frame's full result in the report (else only the summaries; on_frame still sees
     // the full frame).
     bool keep_results = true;
@@ -75,8 +79,10 @@ struct PlayedFrame {
 struct PlayReport {
     std::vector<PlayedFrame> frames;
     std::size_t topology_changes = 0;
-    double setup_ms = 0;  // creating the scene with the first frame's objects
-    double wall_ms = 0;   // from the first frame sent to the last answer
+    double setup_ms = 0;            // creating the scene with the first frame's objects
+    double wall_ms = 0;             // from the first frame sent to the last answer
+    std::uint64_t recreations = 0;  // play_remote with resilient: scenes re-created
+    std::vector<std::string> recreation_causes;  // the stream's failure before each re-creation
 };
 
 StatusOr<PlayReport> play_local(const Sequence& sequence, const PlayOptions& options);

@@ -296,6 +296,19 @@ class JsonOutput(unittest.TestCase):
         remote = self.check("verify", "verify", "--json", "--server", self.daemon.address,
                             "--model", "plant", "--tolerance", "0.05", "--quiet")
         self.assertEqual(local["pairs"], remote["pairs"])
+        # Shards (--shard I/N) and their merge; --reproducible leaves out the run's timings.
+        single = self.check("verify", "verify", "--json", "--store", self.store, "--tolerance",
+                            "0.05", "--reproducible", "--quiet")
+        files = []
+        for i in range(2):
+            shard = self.check("verify_shard", "verify", "--json", "--store", self.store,
+                               "--tolerance", "0.05", "--shard", f"{i}/2", "--reproducible",
+                               "--quiet")
+            files.append(os.path.join(self.tmp, f"shard-{i}.json"))
+            with open(files[-1], "w") as f:
+                json.dump(shard, f)
+        merged = self.check("verify", "verify", "--json", "--merge", *files, "--reproducible")
+        self.assertEqual(merged, single)
 
     def test_region(self):
         whole = self.check("region", "region", "--json", "--server", self.daemon.address,

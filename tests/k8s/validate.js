@@ -1,7 +1,8 @@
 // Every Kubernetes manifest in deploy/k8s validated offline against the Kubernetes API schema
 // (the npm package kubernetes-models carries the OpenAPI schemas of every built-in kind; unknown
 // fields and wrong types are errors), plus the project's own rules: a proximad pod's grace period
-// outlasts its --drain-seconds, its probes are gRPC probes, it has requests and limits. Broken
+// outlasts its --drain-seconds, its probes are gRPC probes, it has requests and limits; a
+// verification Job is Indexed and runs shard JOB_COMPLETION_INDEX of N = completions. Broken
 // manifests (below) must fail, so the check itself is checked.
 //
 //   node tests/k8s/validate.js [DIR]     (default: deploy/k8s next to this repository's tests/)
@@ -65,8 +66,30 @@ function checkFields(value, dts, where) {
   }
 }
 
+// A verification Job (deploy/k8s/verify-job.yaml): Indexed, and its pod k runs shard k of N
+// with N = completions, k from JOB_COMPLETION_INDEX (docs/massive.md, "Shards").
+function verifyJobRules(doc) {
+  const spec = doc.spec;
+  if (spec.completionMode !== 'Indexed') {
+    throw new Error(`a verification Job must be completionMode: Indexed (got ${spec.completionMode})`);
+  }
+  const containers = spec.template.spec.containers;
+  const line = containers.map((c) => [...(c.command || []), ...(c.args || [])].join(' ')).join(' ');
+  const shard = line.match(/--shard[ =]"?\$\{?JOB_COMPLETION_INDEX\}?\/(\d+)"?/);
+  if (!shard) throw new Error('the verify container must pass --shard "${JOB_COMPLETION_INDEX}/N"');
+  if (Number(shard[1]) !== spec.completions) {
+    throw new Error(`--shard .../${shard[1]} but completions is ${spec.completions}: the shards would not cover the model`);
+  }
+  if (!/--out[ =]\S*\$\{?JOB_COMPLETION_INDEX/.test(line)) {
+    throw new Error('each shard must write its own --out file (named by JOB_COMPLETION_INDEX)');
+  }
+}
+
 function projectRules(doc) {
-  const pod = doc.kind === 'StatefulSet' || doc.kind === 'Deployment' ? doc.spec.template.spec : null;
+  if (doc.kind === 'Job' && /proxima verify/.test(JSON.stringify(doc.spec.template.spec.containers))) {
+    verifyJobRules(doc);
+  }
+  const pod = ['StatefulSet', 'Deployment', 'Job'].includes(doc.kind) ? doc.spec.template.spec : null;
   if (!pod) return;
   for (const c of pod.containers) {
     if (!c.resources || !c.resources.requests || !c.resources.limits) {
@@ -125,7 +148,7 @@ for (const f of files) {
   all.push(...docs);
 }
 const kinds = new Set(all.map((d) => d.kind));
-for (const k of ['StatefulSet', 'PodDisruptionBudget', 'Service', 'Deployment', 'ConfigMap']) {
+for (const k of ['StatefulSet', 'PodDisruptionBudget', 'Service', 'Deployment', 'ConfigMap', 'Job']) {
   if (!kinds.has(k)) throw new Error(`deploy/k8s has no ${k}`);
 }
 
@@ -148,4 +171,20 @@ mustFail('an unknown kind', { apiVersion: 'apps/v1', kind: 'StatefulSetz', metad
 mustFail('a grace period shorter than the drain', broken((d) => {
   d.spec.template.spec.terminationGracePeriodSeconds = 5;
 }));
-console.log(`ok: ${all.length} manifests valid, 6 broken ones rejected`);
+// The verification Job, broken the same way.
+const job = all.find((d) => d.kind === 'Job');
+const brokenJob = (edit) => {
+  const copy = JSON.parse(JSON.stringify(job));
+  edit(copy);
+  return copy;
+};
+mustFail('a verification Job that is not Indexed', brokenJob((d) => { d.spec.completionMode = 'NonIndexed'; }));
+mustFail('a verification Job whose N is not its completions', brokenJob((d) => { d.spec.completions = 4; }));
+mustFail('a verification Job without --shard', brokenJob((d) => {
+  const c = d.spec.template.spec.containers[0];
+  c.command = c.command.map((a) => a.replace(/--shard \S+/, ''));
+}));
+mustFail('a verification Job with an unknown field (spec.completionsMode)', brokenJob((d) => {
+  d.spec.completionsMode = 'Indexed';
+}));
+console.log(`ok: ${all.length} manifests valid, 10 broken ones rejected`);

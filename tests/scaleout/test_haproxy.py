@@ -10,6 +10,7 @@ and go on with the same answers; the other clients see no error at all.
 Skipped when haproxy is not installed (deploy/setup.sh installs Debian's haproxy).
 """
 
+import json
 import os
 import re
 import shutil
@@ -290,6 +291,85 @@ def test_cli_calls_meet_on_one_daemon(cluster, tmp_path):
                               str(a), str(b)], capture_output=True, text=True, timeout=60)
         assert run.returncode == 0, run.stderr
         assert "0.25" in run.stdout, run.stdout
+
+
+def write_sequence(folder, gaps):
+    """A sequence folder: frame k is two unit cubes `gaps[k]` apart along x (one OBJ, two
+    components: play it with --split-components)."""
+    folder.mkdir()
+    a, b = cube("a"), cube("b")
+    for k, gap in enumerate(gaps):
+        lines = [f"v {x} {y} {z}" for x, y, z in a.vertices]
+        lines += [f"v {x + 1.0 + gap} {y} {z}" for x, y, z in b.vertices]
+        lines += [f"f {i + 1} {j + 1} {m + 1}" for i, j, m in a.triangles]
+        lines += [f"f {i + 9} {j + 9} {m + 9}" for i, j, m in b.triangles]
+        (folder / f"frame_{k:03d}.obj").write_text("\n".join(lines) + "\n")
+
+
+def test_resilient_play_survives_its_daemon(cluster, tmp_path):
+    """`proxima play --server HAPROXY --resilient` (a C++ ResilientScene) keeps playing when the
+    daemon that holds its scene is SIGKILLed: through HAProxy its stream ends CANCELLED
+    ("RST_STREAM error code 8"), which the session must take as "the daemon went away" like
+    UNAVAILABLE; it re-creates the scene on a surviving daemon, re-sends the frames in flight, and
+    every frame is answered exactly once, in order, with the answer a single daemon gives. A client
+    of another daemon sees no error."""
+    if not PROXIMA:
+        pytest.fail("PROXIMA (the proxima binary) is not set")
+    gaps = [0.25 + 0.01 * k for k in range(80)]
+    seq = tmp_path / "seq"
+    write_sequence(seq, gaps)
+    out = tmp_path / "frames.jsonl"
+    direct = [proxima.Client(addr, timeout=10) for _, addr, _ in cluster["daemons"]]
+    play = subprocess.Popen([PROXIMA, "play", str(seq), "--split-components", "--server",
+                             cluster["front"], "--resilient", "--fps", "20", "--in-flight", "2",
+                             "--query", "separation", "--quiet", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # The daemon that holds the play's scene (the only scene of this cluster so far).
+        victim = []
+        wait_until(lambda: victim.extend(i for i, c in enumerate(direct)
+                                         if c.server_info().live_scenes == 1) or victim,
+                   "the play's scene to appear on a daemon")
+        victim = victim[0]
+        # A client of another daemon (its route chosen until it lands on one).
+        other = None
+        for n in range(40):
+            s = Session(cluster["front"], f"other-{n:02d}")
+            if owners(direct, s.scene.scene_id, s.route) != [victim]:
+                other = s
+                break
+            s.client.delete_scene(s.scene.scene_id)
+            s.client.close()
+        assert other is not None, "no route landed on another daemon"
+        wait_until(lambda: out.exists() and len(out.read_text().splitlines()) >= 10,
+                   "the first ten frames")
+        cluster["daemons"][victim][0].send_signal(signal.SIGKILL)
+        cluster["daemons"][victim][0].wait()
+        direct[victim].close()
+        direct[victim] = None
+        assert other.query(1.75) == pytest.approx(1.75)  # at once: no error
+        stdout, stderr = play.communicate(timeout=60)
+    finally:
+        if play.poll() is None:
+            play.kill()
+            play.wait()
+    print(stderr, file=sys.stderr)  # the summary: how many re-creations, after which failure
+    assert play.returncode == 0, stderr
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [f["frame"] for f in lines] == list(range(len(gaps)))
+    for f, gap in zip(lines, gaps):
+        assert f["object_count"] == 2
+        assert f["closest"]["distance"] == pytest.approx(gap), f
+    # It was re-created (at least once: the scene was on the killed daemon), on a surviving
+    # daemon, which the play then deleted it from: only the other client's scene is left.
+    made = re.search(r"scene re-created (\d+) times", stderr)
+    assert made and int(made.group(1)) >= 1, stderr
+    assert sum(c.server_info().live_scenes for c in direct if c is not None) == 1  # other's
+    assert other.query(0.5) == pytest.approx(0.5)
+    other.client.close()
+    for c in direct:
+        if c is not None:
+            c.close()
 
 
 if __name__ == "__main__":

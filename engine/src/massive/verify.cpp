@@ -171,6 +171,7 @@ struct VerifyRun {
     Status failure;
     std::atomic<bool> failed{false};
     std::vector<ObjectPairResult> found;
+    std::vector<double> found_sq;  // the exact squared distance of each of `found`
 
     // Hints the pieces of the edges after `from`, up to the prefetch budget, in order.
     void issue_hints(std::size_t from) {
@@ -219,6 +220,7 @@ struct VerifyRun {
         }
         if (--agg.remaining == 0 && agg.found) {
             found.push_back(agg.result);
+            found_sq.push_back(agg.best_sq);
             if (on_pair) {
                 on_pair(agg.result);
             }
@@ -290,13 +292,32 @@ struct VerifyRun {
 
 }  // namespace
 
-StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, GeometryCache& cache,
-                                    const VerifyOptions& options,
-                                    const std::function<void(const ObjectPairResult&)>& on_pair,
-                                    std::vector<ObjectPairResult>* all, const ProgressFn& progress,
-                                    const CancelToken* cancel) {
+namespace {
+
+// Estimated work of a subgraph: the triangles of both pieces of each of its piece pairs.
+std::uint64_t subgraph_work(const LocalizedSubgraph& sg, const std::vector<PieceInfo>& pieces) {
+    std::uint64_t work = 0;
+    for (const auto& [a, b] : sg.edges) {
+        work += static_cast<std::uint64_t>(pieces[a].triangle_count) + pieces[b].triangle_count;
+    }
+    return work;
+}
+
+// One run over the schedule's subgraphs, or over one shard's (shard_count > 1).
+StatusOr<VerifyStats> verify_run(const std::shared_ptr<const Store>& store, GeometryCache& cache,
+                                 const VerifyOptions& options, std::uint32_t shard_index,
+                                 std::uint32_t shard_count,
+                                 const std::function<void(const ObjectPairResult&)>& on_pair,
+                                 std::vector<ObjectPairResult>* all, std::vector<double>* all_sq,
+                                 ShardStats* shard, const ProgressFn& progress,
+                                 const CancelToken* cancel) {
     if (!std::isfinite(options.tolerance) || options.tolerance < 0.0) {
         return invalid_argument("tolerance must be a finite distance >= 0");
+    }
+    if (shard_count == 0 || shard_index >= shard_count) {
+        return invalid_argument("shard " + std::to_string(shard_index) + "/" +
+                                std::to_string(shard_count) +
+                                ": the index must be below the count (0 <= I < N)");
     }
     VerifyStats stats;
     stats.objects = store->objects().size();
@@ -314,11 +335,29 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
 
     // The edges in processing order, and how many piece pairs each object pair has: an object
     // pair's result is final (and streamed) when its last piece pair is done.
-    const auto edges = edges_in_order(*schedule);
-    stats.edges = edges.size();
-    stats.edge_triangles = edge_triangles(edges, store->pieces());
+    const auto all_edges = edges_in_order(*schedule);
+    stats.edges = all_edges.size();
+    stats.edge_triangles = edge_triangles(all_edges, store->pieces());
+    stats.object_pairs = object_pairs(all_edges, store->pieces()).size();
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+    if (shard_count == 1) {
+        edges = all_edges;
+    } else {
+        ShardStats s;
+        s.index = shard_index;
+        s.count = shard_count;
+        for (auto k : shard_subgraphs(*schedule, store->pieces(), shard_index, shard_count)) {
+            const auto& sg = schedule->subgraphs[k];
+            edges.insert(edges.end(), sg.edges.begin(), sg.edges.end());
+            s.work += subgraph_work(sg, store->pieces());
+            ++s.subgraphs;
+        }
+        s.edges = edges.size();
+        if (shard != nullptr) {
+            *shard = s;
+        }
+    }
     auto pairs = object_pairs(edges, store->pieces());
-    stats.object_pairs = pairs.size();
 
     VerifyRun run(store, cache, edges, pairs, on_pair, progress, cancel);
     run.tol_sq = options.tolerance * options.tolerance;
@@ -339,12 +378,123 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
     stats.pairs_found = run.found.size();
     stats.cache = counters_since(before, cache.stats());
     if (all != nullptr) {
-        std::sort(run.found.begin(), run.found.end(), [](const auto& x, const auto& y) {
-            return std::tie(x.object_a, x.object_b) < std::tie(y.object_a, y.object_b);
+        std::vector<std::size_t> order(run.found.size());
+        for (std::size_t k = 0; k < order.size(); ++k) {
+            order[k] = k;
+        }
+        std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+            return std::tie(run.found[x].object_a, run.found[x].object_b) <
+                   std::tie(run.found[y].object_a, run.found[y].object_b);
         });
-        *all = std::move(run.found);
+        all->clear();
+        if (all_sq != nullptr) {
+            all_sq->clear();
+        }
+        for (auto k : order) {
+            all->push_back(run.found[k]);
+            if (all_sq != nullptr) {
+                all_sq->push_back(run.found_sq[k]);
+            }
+        }
     }
     return stats;
+}
+
+}  // namespace
+
+StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, GeometryCache& cache,
+                                    const VerifyOptions& options,
+                                    const std::function<void(const ObjectPairResult&)>& on_pair,
+                                    std::vector<ObjectPairResult>* all, const ProgressFn& progress,
+                                    const CancelToken* cancel) {
+    return verify_run(store, cache, options, 0, 1, on_pair, all, nullptr, nullptr, progress,
+                      cancel);
+}
+
+std::vector<std::size_t> shard_subgraphs(const Schedule& schedule,
+                                         const std::vector<PieceInfo>& pieces, std::uint32_t index,
+                                         std::uint32_t count) {
+    std::vector<std::size_t> out;
+    if (count == 0 || index >= count) {
+        return out;
+    }
+    const std::size_t n = schedule.subgraphs.size();
+    std::vector<std::uint64_t> work(n);
+    std::vector<std::size_t> order(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        work[k] = subgraph_work(schedule.subgraphs[k], pieces);
+        order[k] = k;
+    }
+    // Longest processing time first: the heaviest subgraph to the lightest group.
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t x, std::size_t y) { return work[x] > work[y]; });
+    std::vector<std::uint64_t> load(count, 0);
+    std::vector<std::uint32_t> group(n, 0);
+    for (auto k : order) {
+        const auto lightest =
+            static_cast<std::uint32_t>(std::min_element(load.begin(), load.end()) - load.begin());
+        group[k] = lightest;
+        load[lightest] += work[k];
+    }
+    for (std::size_t k = 0; k < n; ++k) {
+        if (group[k] == index) {
+            out.push_back(k);  // processing order within the shard
+        }
+    }
+    return out;
+}
+
+StatusOr<VerifyStats> verify_shard(const std::shared_ptr<const Store>& store, GeometryCache& cache,
+                                   const VerifyOptions& options, std::uint32_t index,
+                                   std::uint32_t count, std::vector<ShardPair>* pairs,
+                                   ShardStats* shard, const ProgressFn& progress,
+                                   const CancelToken* cancel) {
+    std::vector<ObjectPairResult> found;
+    std::vector<double> found_sq;
+    ShardStats s;
+    s.index = index;
+    s.count = count;
+    auto stats = verify_run(store, cache, options, index, count, {}, &found, &found_sq, &s,
+                            progress, cancel);
+    if (!stats.ok()) {
+        return stats;
+    }
+    if (count == 1) {
+        s.subgraphs = stats->subgraphs;
+        s.edges = stats->edges;
+    }
+    if (shard != nullptr) {
+        *shard = s;
+    }
+    if (pairs != nullptr) {
+        pairs->clear();
+        for (std::size_t k = 0; k < found.size(); ++k) {
+            pairs->push_back({found[k], found_sq[k]});
+        }
+    }
+    return stats;
+}
+
+std::vector<ObjectPairResult> merge_shard_pairs(const std::vector<std::vector<ShardPair>>& shards) {
+    std::unordered_map<std::uint64_t, ShardPair> best;
+    for (const auto& shard : shards) {
+        for (const auto& p : shard) {
+            auto [it, fresh] = best.try_emplace(pair_key(p.pair.object_a, p.pair.object_b), p);
+            if (!fresh && better_hit(p.squared_distance, p.pair.triangle_a, p.pair.triangle_b,
+                                     it->second.pair, it->second.squared_distance, true)) {
+                it->second = p;
+            }
+        }
+    }
+    std::vector<ObjectPairResult> out;
+    out.reserve(best.size());
+    for (const auto& [key, p] : best) {
+        out.push_back(p.pair);
+    }
+    std::sort(out.begin(), out.end(), [](const auto& x, const auto& y) {
+        return std::tie(x.object_a, x.object_b) < std::tie(y.object_a, y.object_b);
+    });
+    return out;
 }
 
 double model_slack(const Store& store) {

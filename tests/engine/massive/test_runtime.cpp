@@ -308,6 +308,60 @@ TEST(StaticVerification, MillionTrianglePlantEqualsBruteForce) {
     fs::remove_all(dir);
 }
 
+// Shards (issue #16): every subgraph in exactly one shard, and the shards' pairs merged equal the
+// single run's exactly, for several N, with a cache small enough for many subgraphs.
+TEST(StaticVerification, ShardsMergeToTheSingleRun) {
+    const auto dir = temp_dir("shards");
+    auto store = plant_store(dir, 60'000, 32ull << 10);
+    const double tolerance = 0.01;
+    GeometryCache cache(512ull << 10);
+    std::vector<ObjectPairResult> single;
+    auto whole = verify_static(store, cache, {tolerance}, {}, &single);
+    ASSERT_TRUE(whole.ok()) << whole.status().to_string();
+    ASSERT_GT(single.size(), 5u);
+    auto schedule = schedule_for(*store, tolerance, cache.budget(), false);
+    ASSERT_TRUE(schedule.ok());
+    ASSERT_GE(schedule->subgraphs.size(), 4u);
+    for (std::uint32_t n : {1u, 2u, 3u, 7u}) {
+        SCOPED_TRACE("N = " + std::to_string(n));
+        std::vector<int> owner(schedule->subgraphs.size(), 0);
+        std::vector<std::vector<ShardPair>> shards(n);
+        std::uint64_t edges = 0;
+        bool split_pair = false;
+        std::map<std::pair<std::uint32_t, std::uint32_t>, int> seen;
+        for (std::uint32_t i = 0; i < n; ++i) {
+            for (auto k : shard_subgraphs(*schedule, store->pieces(), i, n)) {
+                ++owner[k];
+            }
+            ShardStats shard;
+            auto stats = verify_shard(store, cache, {tolerance}, i, n, &shards[i], &shard);
+            ASSERT_TRUE(stats.ok()) << stats.status().to_string();
+            EXPECT_EQ(stats->edges, whole->edges);  // the whole model's counts
+            EXPECT_EQ(stats->object_pairs, whole->object_pairs);
+            EXPECT_EQ(shard.index, i);
+            EXPECT_EQ(shard.count, n);
+            edges += shard.edges;
+            for (const auto& p : shards[i]) {
+                split_pair |= ++seen[{p.pair.object_a, p.pair.object_b}] > 1;
+                EXPECT_EQ(std::sqrt(p.squared_distance), p.pair.distance);
+            }
+        }
+        for (int c : owner) {
+            EXPECT_EQ(c, 1);
+        }
+        EXPECT_EQ(edges, whole->edges);
+        if (n >= 3) {
+            EXPECT_TRUE(split_pair) << "no object pair spans two shards: the merge is untested";
+        }
+        expect_same_pairs(merge_shard_pairs(shards), single);
+    }
+    std::vector<ShardPair> none;
+    auto bad = verify_shard(store, cache, {tolerance}, 3, 3, &none);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.status().code(), StatusCode::invalid_argument);
+    fs::remove_all(dir);
+}
+
 TEST(StaticVerification, CancelledAndBadTolerance) {
     const auto dir = temp_dir("cancel");
     auto store = plant_store(dir, 60'000, 1ull << 20);

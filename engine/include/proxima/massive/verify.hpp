@@ -67,6 +67,48 @@ StatusOr<VerifyStats> verify_static(const std::shared_ptr<const Store>& store, G
                                     const ProgressFn& progress = {},
                                     const CancelToken* cancel = nullptr);
 
+// --- Shards: one verification split over several processes or machines ----------------------
+//
+// Shard i of n takes the i-th of n groups of the schedule's localized subgraphs, balanced by
+// estimated work (the triangles of both pieces of each piece pair, summed per subgraph; the
+// heaviest subgraph first goes to the lightest group, ties to the lower index: deterministic for
+// a given store generation, tolerance and cache budget). An object pair's piece pairs may fall in
+// several shards, so a shard reports each object pair's best hit among its own piece pairs, with
+// the exact squared distance; merge_shard_pairs keeps the best of them in the same canonical
+// order as a single run (squared distance, then triangle indices), which is the single run's
+// answer exactly.
+
+struct ShardPair {
+    ObjectPairResult pair;
+    double squared_distance = 0.0;
+};
+
+struct ShardStats {
+    std::uint32_t index = 0;
+    std::uint32_t count = 1;
+    std::uint64_t subgraphs = 0;  // this shard's
+    std::uint64_t edges = 0;      // this shard's piece pairs
+    std::uint64_t work = 0;       // this shard's estimated work (triangles)
+};
+
+// The indices (in processing order) of the subgraphs of shard `index` of `count`.
+std::vector<std::size_t> shard_subgraphs(const Schedule& schedule,
+                                         const std::vector<PieceInfo>& pieces, std::uint32_t index,
+                                         std::uint32_t count);
+
+// Runs shard `index` of `count` (INVALID_ARGUMENT unless index < count). The statistics are those
+// of the whole model and schedule (objects, pieces, subgraphs, edges, object_pairs), except
+// exact_tests, pairs_found, seconds and cache, which are this shard's; `pairs` gets this shard's
+// object pairs within tolerance, sorted by (object_a, object_b).
+StatusOr<VerifyStats> verify_shard(const std::shared_ptr<const Store>& store, GeometryCache& cache,
+                                   const VerifyOptions& options, std::uint32_t index,
+                                   std::uint32_t count, std::vector<ShardPair>* pairs,
+                                   ShardStats* shard = nullptr, const ProgressFn& progress = {},
+                                   const CancelToken* cancel = nullptr);
+
+// The shards' pairs combined: per object pair the best hit, sorted by (object_a, object_b).
+std::vector<ObjectPairResult> merge_shard_pairs(const std::vector<std::vector<ShardPair>>& shards);
+
 // The schedule for (tolerance, cache budget): read from the store's sidecar when present, else
 // planned (and written when `persist`).
 StatusOr<Schedule> schedule_for(const Store& store, double tolerance, std::uint64_t cache_bytes,
