@@ -14,6 +14,8 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 const GREY = new THREE.Color(0x9aa0a8);
 const RED = new THREE.Color(0xe02020);
 const AMBER = new THREE.Color(0xffb000);
+const PALE_RED = new THREE.Color(0xc89090);
+const PALE_AMBER = new THREE.Color(0xc8b48c);
 const AVATAR_SIZE = 0.5;
 
 const $ = (id) => document.getElementById(id);
@@ -192,6 +194,14 @@ function setTriangleColour(object, triangle, colour) {
     return true;
   }
   return false;
+}
+
+function tintObject(object, colour) {
+  for (const p of state.objects[object]?.pieces || []) {
+    const attr = p.mesh.geometry.getAttribute('color');
+    for (let i = 0; i < attr.count; i++) colour.toArray(attr.array, 3 * i);
+    attr.needsUpdate = true;
+  }
 }
 
 // --- the gateway connection ----------------------------------------------------------------
@@ -380,12 +390,15 @@ async function onEditApplied(e) {
 
 // Colours the triangles of the latest result: collisions red (they win), within amber.
 function recolour() {
-  for (const c of [...state.coloured.red, ...state.coloured.amber]) setTriangleColour(c.object, c.triangle, GREY);
+  for (const c of [...state.coloured.red, ...state.coloured.amber]) tintObject(c.object, GREY);
   state.coloured = { red: [], amber: [] };
   const r = state.lastResult;
   segment.visible = false;
   setLabel('nearest', null);
   if (!r) return;
+  // The objects of the pairs, lightly tinted so that a pair shows whichever side is in view.
+  for (const h of r.within) tintObject(h.object, PALE_AMBER);
+  for (const h of r.collisions) tintObject(h.object, PALE_RED);
   for (const h of r.within) {
     if (setTriangleColour(h.object, h.object_triangle, AMBER)) state.coloured.amber.push({ object: h.object, triangle: h.object_triangle });
   }
