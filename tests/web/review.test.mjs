@@ -276,8 +276,29 @@ test('two pages in one room: drag into an object, the other sees it; pick a tria
   await b.click('#edit-delete');
   await until(a, () => window.__proxima.objects[2]?.deleted === true);
   await until(b, () => window.__proxima.objects[2]?.deleted === true);
-  assert.deepEqual(await proxima(a, () => window.__proxima.edits.map((e) => [e.member, e.what, e.object])),
-                   [['bob', 'EDIT_DELETE', 2]]);
+
+  // B moves box 0 by +1 in x (picked, then its Move button): both pages show it moved.
+  const box0 = await proxima(b, () => window.__proxima.project(0.5, 0, 0.5));
+  await b.mouse.click(box0.x, box0.y);
+  assert.equal((await proxima(b, () => window.__proxima.pick)).object, 0);
+  await b.click('#edit-move');
+  for (const p of [a, b]) {
+    await until(p, () => window.__proxima.objects[0]?.currentT?.[3] === 1);
+    assert.deepEqual(await proxima(p, () => window.__proxima.triangleCentre(0, 3)).then((c) => c.map((x) => +x.toFixed(4))),
+                     [1 + 2 / 3, 2 / 3, 1].map((x) => +x.toFixed(4)), 'box 0 drawn where it moved');
+  }
+
+  // A adds a box next to its avatar: both pages fetch it from the daemon (FetchRegion, the room).
+  await a.click('#edit-add');
+  await until(a, () => window.__proxima.edits.length === 3);
+  const added = (await proxima(a, () => window.__proxima.edits))[2];
+  assert.equal(added.what, 'EDIT_ADD');
+  for (const p of [a, b]) {
+    await until(p, (o) => window.__proxima.objects[o]?.pieces?.length > 0, added.object);
+    assert.equal(await proxima(p, (o) => window.__proxima.objects[o].pieces.reduce((n, x) => n + x.triangleIds.length, 0), added.object), 12);
+  }
+  assert.deepEqual(await proxima(b, () => window.__proxima.edits.map((e) => [e.member, e.what, e.object])),
+                   [['bob', 'EDIT_DELETE', 2], ['bob', 'EDIT_MOVE', 0], ['ann', 'EDIT_ADD', added.object]]);
   assert.deepEqual(a.errors, []);
   assert.deepEqual(b.errors, []);
   await a.context().close();

@@ -143,7 +143,12 @@ function fitCamera(box) {
 
 // --- model geometry: one THREE.Mesh per piece, non-indexed, a colour per triangle -----------
 
+const loadedPieces = new Set();   // object:first triangle id, so that refetches skip them
+
 function addPiece(piece) {
+  const key = `${piece.object}:${piece.triangle_ids[0]}:${piece.triangle_ids.length}`;
+  if (loadedPieces.has(key) || state.objects[piece.object]?.deleted) return;
+  loadedPieces.add(key);
   const pos = new Float32Array(b64ToBytes(piece.mesh.positions).buffer);
   const idx = new Uint32Array(b64ToBytes(piece.mesh.indices).buffer);
   const n = idx.length / 3;
@@ -253,6 +258,8 @@ function fetchRegion(req, onPiece) {
 }
 
 async function loadRegion(center, radius) {
+  regionCentre = new THREE.Vector3(...center);
+  regionRadius = radius;
   const r = state.region;
   const showProgress = () => {
     const frac = r.trianglesTotal ? r.triangles / r.trianglesTotal : 0;
@@ -372,6 +379,13 @@ async function onEditApplied(e) {
     if (o && e.transform && e.transform.length === 12) {
       o.currentT = e.transform;
       applyObjectTransform(e.object);
+    } else if (o) {
+      // A daemon that does not say where the object went: fetch its room's view again.
+      for (const p of o.pieces) modelGroup.remove(p.mesh);
+      delete state.objects[e.object];
+      for (const k of [...loadedPieces]) if (k.startsWith(`${e.object}:`)) loadedPieces.delete(k);
+      await fetchRegion({ model: state.model, room: state.room, center: [0, 0, 0], radius: 0,
+                          objects: [e.object] }, (piece) => { if (piece) addPiece(piece); });
     }
   } else if (e.what === 'EDIT_DELETE') {
     const o = state.objects[e.object];
@@ -442,8 +456,24 @@ function sendPose() {
   send({ type: 'pose', sequence: state.sequence, m: t });
 }
 
+// With a region radius, the region follows the avatar: moving more than half the radius from
+// where the last region was fetched fetches the region around the new place (pieces already
+// shown are skipped).
+let regionCentre = null;
+let regionRadius = 0;
+let regionBusy = false;
+function followRegion() {
+  if (!regionRadius || regionBusy || !regionCentre) return;
+  if (position.distanceTo(regionCentre) <= regionRadius / 2) return;
+  regionBusy = true;
+  state.region.done = false;
+  loadRegion(position.toArray(), regionRadius).catch((e) => { state.error = e.message; })
+    .finally(() => { regionBusy = false; followRegion(); });
+}
+
 function moveAvatarTo(p) {
   position.copy(p);
+  followRegion();
   poseDirty = true;
   if (!state.pending) sendPose();
 }
