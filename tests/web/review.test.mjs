@@ -5,7 +5,8 @@
 // pixels); clicking a triangle shows the object, triangle id and the daemon's closest pair and
 // distance, checked against the daemon asked directly through grpc-js; screenshots are compared
 // with a tolerance to tests/web/reference/*.png. A second daemon with a token file checks the
-// token: a wrong one is refused, the right one joins, and it never appears in a URL.
+// token: a wrong one is refused, the right one joins, and it never appears in a URL. A third
+// daemon with mutual TLS checks the gateway's --tls-ca / --tls-cert / --tls-key.
 //
 //   PROXIMAD=build/release/server/proximad PROXIMA=build/release/clients/cli/proxima \
 //     node --test tests/web/review.test.mjs
@@ -142,7 +143,16 @@ async function openPage(url, { member, room, start, token = '' }) {
   return page;
 }
 
-const loaded = (page) => page.waitForFunction(() => window.__proxima.loaded === true, null, { timeout: 20000 });
+// Waits until the page joined and loaded its region; on a timeout, says what the page shows.
+async function loaded(page) {
+  try {
+    await page.waitForFunction(() => window.__proxima.loaded === true, null, { timeout: 20000 });
+  } catch (e) {
+    const shown = await page.evaluate(() => JSON.stringify({ phase: window.__proxima.phase, error: window.__proxima.error,
+      form: document.getElementById('join-error').textContent, status: document.getElementById('status').textContent }));
+    throw new Error(`${e.message}; the page: ${shown}`);
+  }
+}
 const proxima = (page, fn, arg) => page.evaluate(fn, arg);
 
 // Waits until the page's state satisfies `fn` (evaluated in the page).
@@ -204,12 +214,14 @@ function daemonAnswer(address, position) {
 
 // --- the tests -----------------------------------------------------------------------------
 
-test('two pages in one room: drag into an object, the other sees it; pick a triangle', async () => {
+test('two pages in one room: drag into an object, the other sees it; pick a triangle', async (t) => {
   const { daemon, url } = await serve('--cache-bytes', String(1 << 20));
   const startA = [1.8, 0.4, 0.5];   // 0.3 from box 0, 0.7 from box 1: box 0 within the tolerance
   const a = await openPage(url, { member: 'ann', room: 'design', start: startA });
   await loaded(a);
+  t.after(() => a.context().close());
   const b = await openPage(url, { member: 'bob', room: 'design', start: [4.5, 3, 0.5] });
+  t.after(() => b.context().close());
   await loaded(b);
   for (const p of [a, b]) {
     const s = await proxima(p, () => ({ error: window.__proxima.error, region: window.__proxima.region }));
@@ -301,8 +313,6 @@ test('two pages in one room: drag into an object, the other sees it; pick a tria
                    [['bob', 'EDIT_DELETE', 2], ['bob', 'EDIT_MOVE', 0], ['ann', 'EDIT_ADD', added.object]]);
   assert.deepEqual(a.errors, []);
   assert.deepEqual(b.errors, []);
-  await a.context().close();
-  await b.context().close();
 });
 
 test('token: a wrong one is refused, the right one joins; never in a URL', async () => {
@@ -320,4 +330,37 @@ test('token: a wrong one is refused, the right one joins; never in a URL', async
   assert.equal(await proxima(right, () => window.__proxima.region.triangles), 36);
   assert.ok(!right.url().includes(TOKEN), 'the token is not in the URL');
   await right.context().close();
+});
+
+test('TLS: the gateway reaches a mutual-TLS daemon with its CA and client certificate', async () => {
+  const pki = path.join(tmp, 'pki');
+  fs.mkdirSync(pki);
+  const f = (name) => path.join(pki, name);
+  const openssl = (...args) => execFileSync('openssl', args, { stdio: ['ignore', 'pipe', 'pipe'] });
+  const key = ['-newkey', 'ec', '-pkeyopt', 'ec_paramgen_curve:prime256v1', '-nodes'];
+  openssl('req', '-x509', ...key, '-keyout', f('ca.key'), '-out', f('ca.crt'), '-days', '2', '-subj', '/CN=proxima web test ca');
+  fs.writeFileSync(f('san.ext'), 'subjectAltName=IP:127.0.0.1,DNS:localhost\n');
+  for (const who of ['server', 'client']) {
+    openssl('req', ...key, '-keyout', f(`${who}.key`), '-out', f(`${who}.csr`), '-subj', `/CN=proxima web test ${who}`);
+    openssl('x509', '-req', '-in', f(`${who}.csr`), '-CA', f('ca.crt'), '-CAkey', f('ca.key'), '-CAcreateserial',
+            '-out', f(`${who}.crt`), '-days', '2', ...(who === 'server' ? ['-extfile', f('san.ext')] : []));
+  }
+  const d = await startDaemon('--tls-cert', f('server.crt'), '--tls-key', f('server.key'), '--tls-client-ca', f('ca.crt'));
+  daemons.push(d);
+  // Without a client certificate the daemon refuses the connection: the form says so.
+  const bare = await startGateway({ daemon: d.address, listen: '127.0.0.1:0', dist: path.join(WEB, 'dist'), tlsCa: f('ca.crt') });
+  gateways.push(bare);
+  const refused = await openPage(bare.url, { member: 'eve', room: 'tls', start: [1.8, 0.4, 0.5] });
+  await until(refused, () => window.__proxima.error !== null, undefined, 30000);
+  assert.match(await refused.textContent('#join-error'), /UNAVAILABLE/);
+  await refused.context().close();
+  const g = await startGateway({ daemon: d.address, listen: '127.0.0.1:0', dist: path.join(WEB, 'dist'),
+                                 tlsCa: f('ca.crt'), tlsCert: f('client.crt'), tlsKey: f('client.key') });
+  gateways.push(g);
+  const page = await openPage(g.url, { member: 'ann', room: 'tls', start: [1.8, 0.4, 0.5] });
+  await loaded(page);
+  assert.equal(await proxima(page, () => window.__proxima.error), null);
+  assert.equal(await proxima(page, () => window.__proxima.region.triangles), 36);
+  await until(page, () => window.__proxima.lastResult?.within?.length === 1);
+  await page.context().close();
 });

@@ -83,6 +83,7 @@ function initScene() {
   scene.add(modelGroup);
   controls = new OrbitControls(camera, canvas);
   controls.enableDamping = false;
+  controls.addEventListener('change', redraw);
   const lineGeom = new THREE.BufferGeometry().setAttribute('position',
     new THREE.Float32BufferAttribute([0, 0, 0, 0, 0, 0], 3));
   segment = new THREE.Line(lineGeom, new THREE.LineBasicMaterial({ color: 0x2060ff, depthTest: false }));
@@ -100,9 +101,16 @@ function resize() {
   renderer.setSize(w, h, false);
   camera.aspect = w / h;
   camera.updateProjectionMatrix();
+  redraw();
 }
 
+// Frames are drawn only when something changed (software WebGL is expensive).
+let dirty = true;
+const redraw = () => { dirty = true; };
+
 function render() {
+  if (!dirty) return;
+  dirty = false;
   renderer.render(scene, camera);
   for (const l of Object.values(labels)) {
     const v = l.position.clone().project(camera);
@@ -129,6 +137,7 @@ function setLabel(key, text, position, cls = '') {
 }
 
 function fitCamera(box) {
+  redraw();
   const lo = new THREE.Vector3(box.lo.x, box.lo.y, box.lo.z);
   const hi = new THREE.Vector3(box.hi.x, box.hi.y, box.hi.z);
   const centre = lo.clone().add(hi).multiplyScalar(0.5);
@@ -146,6 +155,7 @@ function fitCamera(box) {
 const loadedPieces = new Set();   // object:first triangle id, so that refetches skip them
 
 function addPiece(piece) {
+  redraw();
   const key = `${piece.object}:${piece.triangle_ids[0]}:${piece.triangle_ids.length}`;
   if (loadedPieces.has(key) || state.objects[piece.object]?.deleted) return;
   loadedPieces.add(key);
@@ -179,6 +189,7 @@ function addPiece(piece) {
 
 // A moved object's loaded geometry already has loadedT applied: show it under currentT.
 function applyObjectTransform(object) {
+  redraw();
   const o = state.objects[object];
   const m = toMatrix4(o.currentT).multiply(toMatrix4(o.loadedT).invert());
   for (const p of o.pieces) {
@@ -188,6 +199,7 @@ function applyObjectTransform(object) {
 }
 
 function setTriangleColour(object, triangle, colour) {
+  redraw();
   const o = state.objects[object];
   if (!o) return false;
   for (const p of o.pieces) {
@@ -202,6 +214,7 @@ function setTriangleColour(object, triangle, colour) {
 }
 
 function tintObject(object, colour) {
+  redraw();
   for (const p of state.objects[object]?.pieces || []) {
     const attr = p.mesh.geometry.getAttribute('color');
     for (let i = 0; i < attr.count; i++) colour.toArray(attr.array, 3 * i);
@@ -303,6 +316,7 @@ function avatarFor(member) {
 }
 
 function showMember(name, transform, summary) {
+  redraw();
   const m = state.members[name] ||= { transform: null, summary: null, sequence: 0 };
   if (transform) m.transform = transform;
   if (summary) m.summary = summary;
@@ -327,6 +341,7 @@ function renderMembers() {
 }
 
 function onReviewEvent(e) {
+  redraw();
   switch (e.kind) {
     case 'joined':
       state.phase = 'joined';
@@ -370,6 +385,7 @@ function onReviewEvent(e) {
 }
 
 async function onEditApplied(e) {
+  redraw();
   state.edits.push(e);
   state.modelVersion = e.model_version;
   status(`${e.member} ${e.what === 'EDIT_MOVE' ? 'moved' : e.what === 'EDIT_ADD' ? 'added' : 'deleted'} ` +
@@ -404,6 +420,7 @@ async function onEditApplied(e) {
 
 // Colours the triangles of the latest result: collisions red (they win), within amber.
 function recolour() {
+  redraw();
   for (const c of [...state.coloured.red, ...state.coloured.amber]) tintObject(c.object, GREY);
   state.coloured = { red: [], amber: [] };
   const r = state.lastResult;
