@@ -281,6 +281,13 @@ test('two pages in one room: drag into an object, the other sees it; pick a tria
   assert.ok(r > 120 && g < 80 && bl < 80, `B sees ann's avatar red at its centre, got rgb(${r}, ${g}, ${bl})`);
   comparePng('bob-sees-collision', await b.screenshot());
 
+  // Keys move the own avatar too: A steps left (0.25), out of box 1; B sees it.
+  await a.keyboard.press('ArrowLeft');
+  await until(a, () => !window.__proxima.pending && window.__proxima.lastResult?.collisions?.length === 0);
+  const posKey = await proxima(a, () => window.__proxima.members.ann.transform);
+  assert.ok(Math.abs(posKey[3] - (posA[3] - 0.25)) < 1e-9, `ann at x=${posKey[3]} after ArrowLeft`);
+  await until(b, (x) => window.__proxima.members.ann?.transform?.[3] === x && window.__proxima.members.ann.colour === 'amber', posKey[3]);
+
   // An edit by B appears for A: B deletes box 2 (picked by clicking it).
   const box2 = await proxima(b, () => window.__proxima.project(6.5, 0, 0.5));
   await b.mouse.click(box2.x, box2.y);
