@@ -318,8 +318,18 @@ test('two pages in one room: drag into an object, the other sees it; pick a tria
   }
   assert.deepEqual(await proxima(b, () => window.__proxima.edits.map((e) => [e.member, e.what, e.object])),
                    [['bob', 'EDIT_DELETE', 2], ['bob', 'EDIT_MOVE', 0], ['ann', 'EDIT_ADD', added.object]]);
+
+  // A third page that takes a name already in the room is refused: back to the form, which
+  // gives the daemon's status and message; the room is unchanged.
+  const c = await openPage(url, { member: 'ann', room: 'design', start: [0, 3, 0.5] });
+  t.after(() => c.context().close());
+  await until(c, () => window.__proxima.phase === 'form' && window.__proxima.error !== null);
+  assert.match(await c.textContent('#join-error'), /FAILED_PRECONDITION.*already has a member named 'ann'/);
+  assert.equal(await c.isVisible('#join'), true);
+  assert.deepEqual(Object.keys(await proxima(b, () => window.__proxima.members)).sort(), ['ann', 'bob']);
   assert.deepEqual(a.errors, []);
   assert.deepEqual(b.errors, []);
+  assert.deepEqual(c.errors, []);
 });
 
 test('token: a wrong one is refused, the right one joins; never in a URL', async () => {

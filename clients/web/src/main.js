@@ -253,7 +253,7 @@ function onMessage(msg) {
     if (msg.call === 'region') regionHandlers.get(msg.id)?.(msg);
     state.error = `${msg.call}: ${msg.code}: ${msg.message}`;
     status(state.error);
-    if (state.phase === 'joining') showJoinError(state.error);
+    if (state.phase === 'joining' && msg.call === 'review') showJoinError(state.error);
   }
 }
 
@@ -597,10 +597,15 @@ function initEdits() {
 
 let joinedResolve = null;
 
+// A refused join (a hello or the daemon's answer to the join): back to the form, which says why.
 function showJoinError(text) {
   $('join-error').textContent = text;
   state.phase = 'form';
   state.error = text;
+  $('join').hidden = false;
+  $('view').hidden = true;
+  if (ws && ws.readyState <= WebSocket.OPEN) ws.close();
+  joinedResolve?.(null);
 }
 
 async function join(form) {
@@ -626,14 +631,17 @@ async function join(form) {
   position = new THREE.Vector3(...start);
   form.hidden = true;
   $('view').hidden = false;
-  initScene();
-  initInput();
-  initEdits();
+  if (!renderer) {
+    initScene();
+    initInput();
+    initEdits();
+  }
   fitCamera(info.box);
   const joined = new Promise((resolve) => { joinedResolve = resolve; });
   send({ type: 'join', room: f.room, model: f.model, member: f.member, tolerance: Number(f.tolerance),
          nearest: true, avatar: boxMesh('avatar', AVATAR_SIZE) });
-  await joined;
+  if (!(await joined)) return;   // refused: the form says why
+  state.error = null;
   status(`joined room ${f.room} on ${f.model} as ${f.member}`);
   sendPose();
   try {
