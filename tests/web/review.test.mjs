@@ -13,7 +13,7 @@
 //   UPDATE_REFERENCES=1 ... rewrites the reference screenshots (docs/review.md shows them).
 //
 // Needs clients/web/node_modules (`npm ci`) and clients/web/dist (`npx vite build`): both made by
-// deploy/setup.sh.
+// deploy/setup.sh; a dist/ older than the page's sources is rebuilt first.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawn, execFileSync } from 'node:child_process';
@@ -35,6 +35,16 @@ for (const [what, file, hint] of [
   ['clients/web/dist', path.join(WEB, 'dist', 'index.html'), 'run deploy/setup.sh (vite build in clients/web)'],
 ]) {
   if (!file || !fs.existsSync(file)) throw new Error(`tests/web: ${what} missing (${file}): ${hint}`);
+}
+// A page built before its sources last changed is rebuilt (vite from clients/web/node_modules).
+{
+  const built = fs.statSync(path.join(WEB, 'dist', 'index.html')).mtimeMs;
+  const sources = [path.join(WEB, 'index.html'), path.join(WEB, 'vite.config.js'),
+                   ...fs.readdirSync(path.join(WEB, 'src')).map((f) => path.join(WEB, 'src', f))];
+  if (sources.some((f) => fs.statSync(f).mtimeMs > built)) {
+    execFileSync(path.join(WEB, 'node_modules', '.bin', 'vite'), ['build', '--logLevel', 'warn'],
+                 { cwd: WEB, stdio: ['ignore', 'inherit', 'inherit'], timeout: 120000 });
+  }
 }
 const require = createRequire(path.join(WEB, 'package.json'));
 const { chromium } = require('playwright-core');
@@ -117,7 +127,7 @@ before(async () => {
   browser = await chromium.launch({
     executablePath: CHROMIUM,
     args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist',
-           '--no-sandbox', '--font-render-hinting=none'],
+           '--no-sandbox', '--disable-dev-shm-usage', '--font-render-hinting=none'],
   });
 });
 
