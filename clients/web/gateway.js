@@ -5,9 +5,13 @@
 // no hand-written HTTP/2). Browsers cannot speak gRPC; this process does it for them.
 //
 //   node clients/web/gateway.js --daemon 127.0.0.1:50051 [--listen 127.0.0.1:8080]
-//        [--tls-ca ca.pem [--tls-cert me.pem --tls-key me.key]] [--dist DIR]
+//        [--tls-ca ca.pem [--tls-cert me.pem --tls-key me.key]]
+//        [--https-cert page.pem --https-key page.key | --allow-insecure] [--dist DIR]
 //
-// The first line on standard output is "listening on http://HOST:PORT/" (port 0 picks one).
+// The first line on standard output is "listening on http://HOST:PORT/" (https with
+// --https-cert; port 0 picks one). Tokens cross the page's connection, so an address beyond
+// loopback needs --https-cert/--https-key (or an explicit --allow-insecure, e.g. behind a
+// TLS-terminating proxy).
 // The token: the page asks for it once and sends it in its first WebSocket message
 // ({"type": "hello", "token": ...}); it is never in a URL. The gateway sends it to the daemon as
 // the metadata `authorization: Bearer TOKEN` on every call of that socket, and never logs it.
@@ -24,6 +28,7 @@
 // Mesh coordinates travel as base64 of little-endian float32 (positions) / uint32 (indices).
 import fs from 'node:fs';
 import http from 'node:http';
+import https from 'node:https';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import grpc from '@grpc/grpc-js';
@@ -37,15 +42,21 @@ const LOAD_OPTIONS = { keepCase: true, longs: Number, enums: String, defaults: t
 function usage(message) {
   process.stderr.write(`gateway: ${message}\nusage: node gateway.js --daemon HOST:PORT ` +
                        '[--listen HOST:PORT] [--tls-ca FILE [--tls-cert FILE --tls-key FILE]] ' +
-                       '[--dist DIR]\n');
+                       '[--https-cert FILE --https-key FILE | --allow-insecure] [--dist DIR]\n');
   process.exit(2);
 }
 
 function parseArgs(argv) {
   const o = { listen: '127.0.0.1:8080', dist: path.join(HERE, 'dist') };
   const keys = { '--daemon': 'daemon', '--listen': 'listen', '--tls-ca': 'tlsCa',
-                 '--tls-cert': 'tlsCert', '--tls-key': 'tlsKey', '--dist': 'dist' };
+                 '--tls-cert': 'tlsCert', '--tls-key': 'tlsKey', '--dist': 'dist',
+                 '--https-cert': 'httpsCert', '--https-key': 'httpsKey' };
   for (let i = 0; i < argv.length; i += 2) {
+    if (argv[i] === '--allow-insecure') {
+      o.allowInsecure = true;
+      i -= 1;
+      continue;
+    }
     const key = keys[argv[i]];
     if (!key) usage(`unknown option ${argv[i]}`);
     if (i + 1 >= argv.length) usage(`${argv[i]} needs a value`);
@@ -54,6 +65,13 @@ function parseArgs(argv) {
   if (!o.daemon) usage('--daemon HOST:PORT is required');
   if (!!o.tlsCert !== !!o.tlsKey) usage('--tls-cert and --tls-key go together');
   if (o.tlsCert && !o.tlsCa) usage('--tls-cert needs --tls-ca');
+  if (!!o.httpsCert !== !!o.httpsKey) usage('--https-cert and --https-key go together');
+  const host = o.listen.slice(0, o.listen.lastIndexOf(':')).replace(/^\[|\]$/g, '');
+  const loopback = ['127.0.0.1', '::1', 'localhost'].includes(host) || host.startsWith('127.');
+  if (!loopback && !o.httpsCert && !o.allowInsecure) {
+    usage(`--listen ${o.listen} is beyond loopback: tokens would cross it in the clear; ` +
+          'give --https-cert and --https-key, or --allow-insecure behind a TLS proxy');
+  }
   if (!/^[^:]+:\d+$/.test(o.listen) && !/^\[.*\]:\d+$/.test(o.listen)) {
     usage(`--listen must be HOST:PORT, got ${o.listen}`);
   }
@@ -236,7 +254,10 @@ export function startGateway(o) {
   if (!fs.existsSync(path.join(o.dist, 'index.html'))) {
     throw new Error(`${o.dist}/index.html is missing: run \`npx vite build\` in clients/web`);
   }
-  const server = http.createServer((req, res) => serveStatic(o.dist, req, res));
+  const handler = (req, res) => serveStatic(o.dist, req, res);
+  const server = o.httpsCert
+    ? https.createServer({ cert: fs.readFileSync(o.httpsCert), key: fs.readFileSync(o.httpsKey) }, handler)
+    : http.createServer(handler);
   const wss = new WebSocketServer({ server, path: '/ws', maxPayload: 64 << 20 });
   wss.on('connection', (ws) => bridge(ws, client));
   const sep = o.listen.lastIndexOf(':');
@@ -246,7 +267,7 @@ export function startGateway(o) {
     server.listen(Number(o.listen.slice(sep + 1)), host, () => {
       const a = server.address();
       const shown = a.family === 'IPv6' ? `[${a.address}]` : a.address;
-      resolve({ url: `http://${shown}:${a.port}/`, close: () => { wss.close(); server.close(); client.close(); } });
+      resolve({ url: `${o.httpsCert ? 'https' : 'http'}://${shown}:${a.port}/`, close: () => { wss.close(); server.close(); client.close(); } });
     });
   });
 }

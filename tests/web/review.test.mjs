@@ -141,7 +141,9 @@ after(async () => {
 // --- page helpers --------------------------------------------------------------------------
 
 async function openPage(url, { member, room, start, token = '' }) {
-  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, deviceScaleFactor: 1 });
+  // The TLS test's page certificate is signed by a CA made there, which chromium does not trust.
+  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, deviceScaleFactor: 1,
+                                             ignoreHTTPSErrors: url.startsWith('https:') });
   const page = await context.newPage();
   const errors = [];
   page.on('pageerror', (e) => errors.push(e.message));
@@ -359,7 +361,7 @@ test('token: a wrong one is refused, the right one joins; never in a URL', async
   await right.context().close();
 });
 
-test('TLS: the gateway reaches a mutual-TLS daemon with its CA and client certificate', async () => {
+test('TLS: the gateway reaches a mutual-TLS daemon with its CA and client certificate, serves HTTPS', async () => {
   const pki = path.join(tmp, 'pki');
   fs.mkdirSync(pki);
   const f = (name) => path.join(pki, name);
@@ -381,13 +383,25 @@ test('TLS: the gateway reaches a mutual-TLS daemon with its CA and client certif
   await until(refused, () => window.__proxima.error !== null, undefined, 30000);
   assert.match(await refused.textContent('#join-error'), /UNAVAILABLE/);
   await refused.context().close();
+  // This one also serves the page over HTTPS (the WebSocket is then wss:).
   const g = await startGateway({ daemon: d.address, listen: '127.0.0.1:0', dist: path.join(WEB, 'dist'),
-                                 tlsCa: f('ca.crt'), tlsCert: f('client.crt'), tlsKey: f('client.key') });
+                                 tlsCa: f('ca.crt'), tlsCert: f('client.crt'), tlsKey: f('client.key'),
+                                 httpsCert: f('server.crt'), httpsKey: f('server.key') });
   gateways.push(g);
+  assert.match(g.url, /^https:\/\/127\.0\.0\.1:\d+\/$/);
   const page = await openPage(g.url, { member: 'ann', room: 'tls', start: [1.8, 0.4, 0.5] });
   await loaded(page);
   assert.equal(await proxima(page, () => window.__proxima.error), null);
   assert.equal(await proxima(page, () => window.__proxima.region.triangles), 36);
   await until(page, () => window.__proxima.lastResult?.within?.length === 1);
   await page.context().close();
+
+  // The command line: beyond loopback without HTTPS is refused, naming the reason.
+  const cli = spawn(process.execPath, [path.join(WEB, 'gateway.js'), '--daemon', d.address, '--listen', '0.0.0.0:0'],
+                    { stdio: ['ignore', 'pipe', 'pipe'] });
+  let err = '';
+  cli.stderr.on('data', (x) => { err += x; });
+  const code = await new Promise((res) => cli.on('exit', res));
+  assert.equal(code, 2);
+  assert.match(err, /beyond loopback: tokens would cross it in the clear/);
 });
