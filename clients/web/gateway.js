@@ -7,6 +7,7 @@
 //   node clients/web/gateway.js --daemon 127.0.0.1:50051 [--listen 127.0.0.1:8080]
 //        [--tls-ca ca.pem [--tls-cert me.pem --tls-key me.key]]
 //        [--https-cert page.pem --https-key page.key | --allow-insecure] [--dist DIR]
+//        [--recordings DIR]
 //
 // The first line on standard output is "listening on http://HOST:PORT/" (https with
 // --https-cert; port 0 picks one). Tokens cross the page's connection, so an address beyond
@@ -23,6 +24,12 @@
 //   {type: "edit", sequence, move: {object, m}} | {add: {name, positions, indices}}
 //                                                | {remove: {object}}
 //   {type: "region", id, model, center: [x,y,z], radius, room, objects, max_triangles}
+//   {type: "watch", recording, tolerance}  -> {type: "watch", frames, objects: [mesh...]}
+//   {type: "frame", index}                 -> {type: "frame", index, positions, result}
+// A recording (--recordings DIR: each subdirectory) is a folder of numbered .obj / .off files,
+// one per frame, each connected component an object (as `proxima play --split-components`);
+// watching it makes a scene on the daemon (deleted when the socket closes) and each frame asked
+// for is one Query on it with the frame's positions (so frames may be visited in any order).
 // gateway -> page: {type: "review", event: {...}} (the ReviewEvent, oneof name in `kind`),
 //   {type: "region", id, piece | progress | summary}, {type: "error", call, code, message}.
 // Mesh coordinates travel as base64 of little-endian float32 (positions) / uint32 (indices).
@@ -42,7 +49,8 @@ const LOAD_OPTIONS = { keepCase: true, longs: Number, enums: String, defaults: t
 function usage(message) {
   process.stderr.write(`gateway: ${message}\nusage: node gateway.js --daemon HOST:PORT ` +
                        '[--listen HOST:PORT] [--tls-ca FILE [--tls-cert FILE --tls-key FILE]] ' +
-                       '[--https-cert FILE --https-key FILE | --allow-insecure] [--dist DIR]\n');
+                       '[--https-cert FILE --https-key FILE | --allow-insecure] [--dist DIR] ' +
+                       '[--recordings DIR]\n');
   process.exit(2);
 }
 
@@ -50,7 +58,7 @@ function parseArgs(argv) {
   const o = { listen: '127.0.0.1:8080', dist: path.join(HERE, 'dist') };
   const keys = { '--daemon': 'daemon', '--listen': 'listen', '--tls-ca': 'tlsCa',
                  '--tls-cert': 'tlsCert', '--tls-key': 'tlsKey', '--dist': 'dist',
-                 '--https-cert': 'httpsCert', '--https-key': 'httpsKey' };
+                 '--https-cert': 'httpsCert', '--https-key': 'httpsKey', '--recordings': 'recordings' };
   for (let i = 0; i < argv.length; i += 2) {
     if (argv[i] === '--allow-insecure') {
       o.allowInsecure = true;
@@ -116,11 +124,85 @@ function reviewEventToJson(e) {
   return { kind, ...body };
 }
 
+// --- recordings: numbered mesh files, each connected component an object --------------------
+
+function parseMeshFile(file) {
+  const text = fs.readFileSync(file, 'utf8');
+  const v = [];
+  const t = [];
+  if (file.endsWith('.off')) {
+    const words = text.replace(/#.*$/gm, '').split(/\s+/).filter(Boolean);
+    if (words[0] !== 'OFF') throw new Error(`${file}: not an OFF file`);
+    const [nv, nf] = [Number(words[1]), Number(words[2])];
+    let k = 4;
+    for (let i = 0; i < 3 * nv; i++) v.push(Number(words[k++]));
+    for (let f = 0; f < nf; f++) {
+      const n = Number(words[k++]);
+      const face = words.slice(k, k + n).map(Number);
+      k += n;
+      for (let i = 1; i + 1 < n; i++) t.push(face[0], face[i], face[i + 1]);
+    }
+  } else {
+    for (const line of text.split('\n')) {
+      const w = line.trim().split(/\s+/);
+      if (w[0] === 'v') v.push(Number(w[1]), Number(w[2]), Number(w[3]));
+      if (w[0] === 'f') {
+        const face = w.slice(1).map((x) => Number(x.split('/')[0]) - 1);
+        for (let i = 1; i + 1 < face.length; i++) t.push(face[0], face[i], face[i + 1]);
+      }
+    }
+  }
+  if (!v.every(Number.isFinite) || t.some((i) => !(i >= 0 && i < v.length / 3))) {
+    throw new Error(`${file}: bad vertex or index`);
+  }
+  return { v, t };
+}
+
+// Connected components (triangles sharing a vertex), in the order of their first triangle; each
+// with its vertices in first-use order and its triangles re-indexed.
+function splitComponents({ v, t }) {
+  const parent = Array.from({ length: v.length / 3 }, (_, i) => i);
+  const find = (x) => { while (parent[x] !== x) x = parent[x] = parent[parent[x]]; return x; };
+  for (let i = 0; i < t.length; i += 3) {
+    parent[find(t[i + 1])] = find(t[i]);
+    parent[find(t[i + 2])] = find(t[i]);
+  }
+  const comps = new Map();
+  for (let i = 0; i < t.length; i += 3) {
+    const root = find(t[i]);
+    if (!comps.has(root)) comps.set(root, { map: new Map(), v: [], t: [] });
+    const c = comps.get(root);
+    for (const x of [t[i], t[i + 1], t[i + 2]]) {
+      if (!c.map.has(x)) { c.map.set(x, c.v.length / 3); c.v.push(v[3 * x], v[3 * x + 1], v[3 * x + 2]); }
+      c.t.push(c.map.get(x));
+    }
+  }
+  return [...comps.values()].map((c) => ({ v: c.v, t: c.t }));
+}
+
+function readRecording(dir) {
+  const natural = (a, b) => a.localeCompare(b, undefined, { numeric: true });
+  const files = fs.readdirSync(dir).filter((f) => /\.(obj|off)$/.test(f)).sort(natural);
+  if (!files.length) throw new Error(`recording ${path.basename(dir)} has no .obj / .off frames`);
+  const frames = files.map((f) => splitComponents(parseMeshFile(path.join(dir, f))));
+  for (let i = 1; i < frames.length; i++) {
+    const same = frames[i].length === frames[0].length &&
+      frames[i].every((c, k) => c.t.length === frames[0][k].t.length && c.t.every((x, j) => x === frames[0][k].t[j]));
+    if (!same) throw new Error(`${files[i]}: its objects or triangles differ from ${files[0]}'s (the page plays moving vertices only)`);
+  }
+  return { files, frames };
+}
+
+const f32 = (a) => Buffer.from(new Float32Array(a).buffer);
+const b64f32 = (a) => f32(a).toString('base64');
+const b64u32 = (a) => Buffer.from(new Uint32Array(a).buffer).toString('base64');
+
 // --- one WebSocket: its token, its review stream, its region fetches ------------------------
 
-function bridge(ws, client) {
+function bridge(ws, client, o) {
   let metadata = null;  // set by hello
   let review = null;
+  let watch = null;     // {recording, scene, ids, tolerance}
   const regions = new Map();
   const send = (obj) => { if (ws.readyState === ws.OPEN) ws.send(JSON.stringify(obj)); };
   const fail = (call, err, extra = {}) => send({ type: 'error', call, ...extra,
@@ -136,7 +218,10 @@ function bridge(ws, client) {
           metadata = null;
           return fail('hello', err);
         }
-        send({ type: 'hello', models: res.models.map((m) => ({
+        const recordings = o.recordings
+          ? fs.readdirSync(o.recordings, { withFileTypes: true }).filter((e) => e.isDirectory()).map((e) => e.name).sort()
+          : [];
+        send({ type: 'hello', recordings, models: res.models.map((m) => ({
           name: m.name, objects: m.objects, triangles: m.triangles, generation: m.generation,
           box: m.box ? { lo: m.box.lo, hi: m.box.hi } : null })) });
       });
@@ -169,6 +254,38 @@ function bridge(ws, client) {
         throw new Error('edit needs move, add or remove');
       }
       review.write({ edit });
+    },
+    watch(msg) {
+      if (watch) throw new Error('this socket already watches a recording');
+      const names = o.recordings ? fs.readdirSync(o.recordings) : [];
+      if (!names.includes(String(msg.recording))) {
+        throw new Error(`no recording ${JSON.stringify(msg.recording)} (have: ${names.join(', ') || 'none'})`);
+      }
+      const recording = readRecording(path.join(o.recordings, String(msg.recording)));
+      const objects = recording.frames[0].map((c, k) => ({ name: `object-${k}`, positions: b64f32(c.v), indices: b64u32(c.t) }));
+      watch = { recording, tolerance: Number(msg.tolerance || 0) };
+      client.CreateScene({ name: `watch ${msg.recording}`, objects: objects.map((m) => meshToProto(m, 'object')) }, metadata, (err, info) => {
+        if (err) { watch = null; return fail('watch', err); }
+        watch.scene = info.scene_id;
+        watch.ids = info.objects.map((x) => x.id);
+        send({ type: 'watch', frames: recording.files.length, files: recording.files, objects });
+      });
+    },
+    frame(msg) {
+      if (!watch || !watch.scene) throw new Error('frame before watch');
+      const index = Number(msg.index);
+      const frame = watch.recording.frames[index];
+      if (!frame) throw new Error(`frame ${msg.index} is not in 0..${watch.recording.frames.length - 1}`);
+      const queries = { separation: true, collisions: true, penetration: true };
+      if (watch.tolerance > 0) queries.tolerance = watch.tolerance;
+      client.Query({ scene_id: watch.scene, frame: index, queries,
+                     positions: frame.map((c, k) => ({ object_id: watch.ids[k], vertices: { type: 'SCALAR_TYPE_FLOAT32', data: f32(c.v) } })) },
+                   metadata, (err, r) => {
+        if (err) return fail('frame', err, { index });
+        send({ type: 'frame', index, positions: frame.map((c) => b64f32(c.v)),
+               result: { collisions: r.collisions, tolerance: r.tolerance, separation: r.separation,
+                         penetrations: r.penetrations } });
+      });
     },
     region(msg) {
       const c = msg.center || [0, 0, 0];
@@ -214,6 +331,7 @@ function bridge(ws, client) {
   });
   ws.on('close', () => {
     if (review) review.end();
+    if (watch && watch.scene) client.DeleteScene({ scene_id: watch.scene }, metadata, () => {});
     for (const call of regions.values()) call.cancel();
   });
 }
@@ -259,7 +377,7 @@ export function startGateway(o) {
     ? https.createServer({ cert: fs.readFileSync(o.httpsCert), key: fs.readFileSync(o.httpsKey) }, handler)
     : http.createServer(handler);
   const wss = new WebSocketServer({ server, path: '/ws', maxPayload: 64 << 20 });
-  wss.on('connection', (ws) => bridge(ws, client));
+  wss.on('connection', (ws) => bridge(ws, client, o));
   const sep = o.listen.lastIndexOf(':');
   const host = o.listen.slice(0, sep).replace(/^\[|\]$/g, '');
   return new Promise((resolve, reject) => {

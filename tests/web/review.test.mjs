@@ -69,6 +69,7 @@ function boxOff(x0) {
   return `OFF\n8 12 0\n${v.map((p) => p.join(' ')).join('\n')}\n${f.map((t) => `3 ${t.join(' ')}`).join('\n')}\n`;
 }
 const BOX_X = [0, 3, 6];
+const SLIDE_X = [2, 1.5, 1.25, 0.9];
 
 let tmp;
 let models;
@@ -78,6 +79,17 @@ function makeModels() {
   const meshes = path.join(tmp, 'meshes');
   fs.mkdirSync(meshes);
   BOX_X.forEach((x, i) => fs.writeFileSync(path.join(meshes, `box-${i}.off`), boxOff(x)));
+  // A recording: two unit boxes in each frame file (two components), the second at x = SLIDE_X[f]:
+  // 1.0, 0.5 and 0.25 apart, then overlapping the first by 0.1.
+  const rec = path.join(tmp, 'recordings', 'slide');
+  fs.mkdirSync(rec, { recursive: true });
+  SLIDE_X.forEach((x, f) => {
+    const a = boxOff(0).split('\n');
+    const b = boxOff(x).split('\n');
+    const verts = [...a.slice(2, 10), ...b.slice(2, 10)];
+    const faces = [...a.slice(10, 22), ...b.slice(10, 22).map((l) => l.replace(/\d+/g, (n, i) => (i === 0 ? n : String(Number(n) + 8))))];
+    fs.writeFileSync(path.join(rec, `frame_${f}.off`), `OFF\n16 24 0\n${verts.join('\n')}\n${faces.join('\n')}\n`);
+  });
   models = path.join(tmp, 'models');
   execFileSync(process.env.PROXIMA, ['import', '--store', path.join(models, 'row'), '--quiet', meshes],
                { stdio: ['ignore', 'pipe', 'pipe'], timeout: 60000 });
@@ -117,7 +129,8 @@ let browser;
 async function serve(...flags) {
   const d = await startDaemon(...flags);
   daemons.push(d);
-  const g = await startGateway({ daemon: d.address, listen: '127.0.0.1:0', dist: path.join(WEB, 'dist') });
+  const g = await startGateway({ daemon: d.address, listen: '127.0.0.1:0', dist: path.join(WEB, 'dist'),
+                                 recordings: path.join(tmp, 'recordings') });
   gateways.push(g);
   return { daemon: d, url: g.url };
 }
@@ -404,4 +417,54 @@ test('TLS: the gateway reaches a mutual-TLS daemon with its CA and client certif
   const code = await new Promise((res) => cli.on('exit', res));
   assert.equal(code, 2);
   assert.match(err, /beyond loopback: tokens would cross it in the clear/);
+});
+
+test('watch a recorded scene stream: timeline, colours, penetration arrows', async () => {
+  const { url } = await serve();
+  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, deviceScaleFactor: 1 });
+  const w = await context.newPage();
+  const errors = [];
+  w.on('pageerror', (e) => errors.push(e.message));
+  await w.goto(`${url}?recording=slide&tolerance=0.5`);
+  await w.click('#join button[type=submit]');
+  await loaded(w);
+  await until(w, () => window.__proxima.watch.index === 0);
+  const at = (p) => proxima(p, () => {
+    const x = window.__proxima.watch;
+    return { index: x.index, frames: x.frames, segments: x.segments, arrows: x.arrows, colours: Object.values(x.colours),
+             sep: x.result.separation.map((s) => s.distance), collisions: x.result.collisions.length,
+             tolerance: x.result.tolerance.map((p) => p.distance) };
+  });
+  let s = await at(w);
+  assert.equal(s.frames, 4);
+  assert.deepEqual(s.sep, [1, 1]);
+  assert.equal(s.segments, 1);
+  assert.deepEqual(s.tolerance, [], '1.0 apart: nothing within 0.5 (non-adjacent triangles of one box are 0.577 apart)');
+  // Step forward twice (the button, then the key): 0.25 apart, triangles coloured by distance.
+  await w.click('#tl-fwd');
+  await until(w, () => window.__proxima.watch.index === 1);
+  await w.keyboard.press('ArrowRight');
+  await until(w, () => window.__proxima.watch.index === 2);
+  s = await at(w);
+  assert.deepEqual(s.sep, [0.25, 0.25]);
+  assert.ok(s.tolerance.length > 0 && s.tolerance.every((d) => d === 0.25), `tolerance pairs ${s.tolerance}`);
+  assert.ok(s.colours.length > 0 && s.colours.every((c) => c === 'map'));
+  assert.equal(s.collisions, 0);
+  assert.equal(await w.textContent('#labels'), '0.2500');
+  // Play: on to the last frame, then it pauses by itself; the overlap is red with an arrow.
+  await w.click('#tl-play');
+  await until(w, () => window.__proxima.watch.index === 3 && !window.__proxima.watch.playing);
+  s = await at(w);
+  assert.ok(s.collisions > 0);
+  assert.ok(s.colours.includes('red'));
+  assert.ok(s.arrows >= 1, 'a penetration arrow');
+  assert.equal(s.segments, 0);
+  assert.equal(await w.textContent('#tl-play'), 'play');
+  comparePng('watch-overlap', await w.screenshot());
+  // Step back (the button) to frame 2 again: the same answer as before.
+  await w.click('#tl-back');
+  await until(w, () => window.__proxima.watch.index === 2);
+  assert.deepEqual((await at(w)).sep, [0.25, 0.25]);
+  assert.deepEqual(errors, []);
+  await context.close();
 });

@@ -10,6 +10,7 @@
 // The page state is exposed as window.__proxima for tests (tests/web).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { startWatch } from './watch.js';
 
 const GREY = new THREE.Color(0x9aa0a8);
 const RED = new THREE.Color(0xe02020);
@@ -136,13 +137,13 @@ function setLabel(key, text, position, cls = '') {
   labels[key].position.copy(position);
 }
 
-function fitCamera(box) {
+function fitCamera(box, scale = 0.8) {
   redraw();
   const lo = new THREE.Vector3(box.lo.x, box.lo.y, box.lo.z);
   const hi = new THREE.Vector3(box.hi.x, box.hi.y, box.hi.z);
   const centre = lo.clone().add(hi).multiplyScalar(0.5);
   const size = hi.clone().sub(lo).length();
-  camera.position.copy(centre).add(new THREE.Vector3(0.15, -1.0, 0.75).multiplyScalar(size * 0.8));
+  camera.position.copy(centre).add(new THREE.Vector3(0.15, -1.0, 0.75).multiplyScalar(size * scale));
   controls.target.copy(centre);
   camera.near = size / 1000;
   camera.far = size * 20;
@@ -248,12 +249,14 @@ function connect(token) {
 
 function onMessage(msg) {
   if (msg.type === 'review') onReviewEvent(msg.event);
+  else if (msg.type === 'watch') watcher?.onWatch(msg);
+  else if (msg.type === 'frame') watcher?.onFrame(msg);
   else if (msg.type === 'region') regionHandlers.get(msg.id)?.(msg);
   else if (msg.type === 'error') {
     if (msg.call === 'region') regionHandlers.get(msg.id)?.(msg);
     state.error = `${msg.call}: ${msg.code}: ${msg.message}`;
     status(state.error);
-    if (state.phase === 'joining' && msg.call === 'review') showJoinError(state.error);
+    if (state.phase === 'joining' && (msg.call === 'review' || msg.call === 'watch')) showJoinError(state.error);
   }
 }
 
@@ -561,7 +564,13 @@ function pick(ray) {
   const pair = all.find((x) => x.object === object) || null;
   state.pick = { object, name: o.name, triangle, pair };
   const lines = [`object ${object} (${o.name})`, `triangle ${triangle}`];
-  if (pair) {
+  const sep = state.watch?.result?.separation?.[object];
+  if (state.watch) {
+    state.pick.pair = sep && sep.has_other ? sep : null;
+    lines.push(sep && sep.has_other
+      ? `closest pair: triangle ${sep.triangle} - object ${sep.other} triangle ${sep.other_triangle}`
+      : 'no other object', ...(sep && sep.has_other ? [`distance ${sep.distance}`] : []));
+  } else if (pair) {
     lines.push(`closest pair to your avatar: object triangle ${pair.object_triangle}, ` +
                `avatar triangle ${pair.avatar_triangle}`, `distance ${pair.distance}`);
   } else {
@@ -570,6 +579,7 @@ function pick(ray) {
   panel.textContent = lines.join('\n');
   panel.hidden = false;
   $('edit-move').disabled = $('edit-delete').disabled = false;
+  redraw();
 }
 
 function initEdits() {
@@ -596,6 +606,39 @@ function initEdits() {
 // --- joining -------------------------------------------------------------------------------
 
 let joinedResolve = null;
+let watcher = null;
+
+// Watch mode: a recording served by the gateway (--recordings), played through the daemon.
+async function watchRecording(f, hello) {
+  if (!hello.recordings.includes(f.recording)) {
+    showJoinError(`no recording ${f.recording} (the gateway has: ${hello.recordings.join(', ') || 'none'})`);
+    return;
+  }
+  $('join').hidden = true;
+  $('view').hidden = false;
+  $('edits').hidden = true;
+  $('progress').hidden = true;
+  state.phase = 'joining';
+  if (!renderer) {
+    initScene();
+    initInput();
+  }
+  let fitted = false;
+  watcher = startWatch({ scene, state, send, b64ToBytes, setLabel, $, tolerance: Number(f.tolerance),
+    group: modelGroup,
+    redraw: () => {
+      if (!fitted) {
+        fitted = true;
+        const box = new THREE.Box3().setFromObject(modelGroup);
+        fitCamera({ lo: box.min, hi: box.max }, 1.2);
+        state.phase = 'watching';
+        state.loaded = true;
+      }
+      redraw();
+    } });
+  send({ type: 'watch', recording: f.recording, tolerance: Number(f.tolerance) });
+  status(`watching recording ${f.recording}`);
+}
 
 // A refused join (a hello or the daemon's answer to the join): back to the form, which says why.
 function showJoinError(text) {
@@ -617,6 +660,10 @@ async function join(form) {
     hello = await connect(f.token);
   } catch (e) {
     showJoinError(e.message);
+    return;
+  }
+  if (f.recording) {
+    await watchRecording(f, hello);
     return;
   }
   const info = hello.models.find((m) => m.name === f.model);
@@ -657,7 +704,7 @@ async function join(form) {
 // Settings that are not secret may come from the query string (?model=&room=&member=&start=);
 // the token never does.
 const params = new URLSearchParams(location.search);
-for (const key of ['model', 'room', 'member', 'tolerance', 'start', 'radius']) {
+for (const key of ['model', 'room', 'member', 'tolerance', 'start', 'radius', 'recording']) {
   if (params.has(key)) document.querySelector(`#join [name=${key}]`).value = params.get(key);
 }
 if (!document.querySelector('#join [name=member]').value) {
