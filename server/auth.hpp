@@ -36,7 +36,7 @@ struct Quotas {
     std::uint64_t max_bytes_held = 0;       // geometry of the principal's scenes (scene_bytes())
     std::uint64_t max_bytes_in_flight = 0;  // request bytes read but not yet answered
     double max_frames_per_second = 0;       // StreamFrames frames and Query calls, bursts of 1 s
-    std::uint64_t max_streams = 0;          // StreamFrames, Review, VerifyModel, UploadObject
+    std::uint64_t max_streams = 0;  // StreamFrames, Review, VerifyModel, FetchRegion, UploadObject
 };
 
 // Bytes of geometry a scene of this size holds, as the quota counts them: float64 vertices and

@@ -107,6 +107,7 @@ StatusOr<EditEvent> Room::apply_edit(RoomMember& editor, const RoomEdit& edit) {
                 return s;
             }
             event.object = edit.object;
+            event.transform = edit.transform;
             break;
         }
         case EditKind::add: {
@@ -219,6 +220,12 @@ std::shared_ptr<Room> RoomRegistry::leave(const std::shared_ptr<Room>& room,
     spdlog::info("room deleted room={} model={} (its last member left)", room->name(),
                  room->model().name);
     return room;
+}
+
+std::shared_ptr<Room> RoomRegistry::find(const std::string& room) const {
+    std::lock_guard lock(m_mu);
+    const auto it = m_rooms.find(room);
+    return it == m_rooms.end() ? nullptr : it->second;
 }
 
 std::size_t RoomRegistry::size() const {

@@ -162,6 +162,9 @@ class RoomRegistry {
     std::shared_ptr<Room> leave(const std::shared_ptr<Room>& room,
                                 const std::shared_ptr<RoomMember>& member);
 
+    // The room of that name, or null when there is none.
+    std::shared_ptr<Room> find(const std::string& room) const;
+
     std::size_t size() const;
 
   private:

@@ -2,8 +2,8 @@
 // metrics, the shutdown drain and GetServerInfo. Each kind of call has a file of its own:
 // scene_calls.cpp (CreateScene, DescribeScene, DeleteScene, Query, Snapshot), upload_stream.cpp
 // (UploadObject), frame_stream.cpp (StreamFrames), model_calls.cpp (ListModels),
-// verify_stream.cpp (VerifyModel), review_stream.cpp (Review); the two bidirectional streams
-// share ordered_stream.hpp.
+// verify_stream.cpp (VerifyModel), review_stream.cpp (Review), region_stream.cpp (FetchRegion);
+// the two bidirectional streams share ordered_stream.hpp.
 #include "service.hpp"
 
 #include <sys/resource.h>

@@ -47,8 +47,8 @@ class ProximityService final : public v1::Proximity::CallbackService {
                                        const v1::SnapshotRequest* request,
                                        v1::SnapshotResponse* response) override;
 
-    // Massive models, verification and review rooms (model_calls.cpp, verify_stream.cpp,
-    // review_stream.cpp).
+    // Massive models, verification, review rooms and regions (model_calls.cpp,
+    // verify_stream.cpp, review_stream.cpp, region_stream.cpp).
     grpc::ServerUnaryReactor* ListModels(grpc::CallbackServerContext* context,
                                          const v1::ListModelsRequest* request,
                                          v1::ListModelsResponse* response) override;
@@ -56,6 +56,8 @@ class ProximityService final : public v1::Proximity::CallbackService {
         grpc::CallbackServerContext* context, const v1::VerifyModelRequest* request) override;
     grpc::ServerBidiReactor<v1::ReviewRequest, v1::ReviewEvent>* Review(
         grpc::CallbackServerContext* context) override;
+    grpc::ServerWriteReactor<v1::RegionEvent>* FetchRegion(
+        grpc::CallbackServerContext* context, const v1::FetchRegionRequest* request) override;
 
     // Before the server starts: reads the token file, starts the idle-scene expiry, opens the
     // models (start_models). The daemon refuses to start on an error.

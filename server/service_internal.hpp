@@ -222,7 +222,7 @@ inline Status shutting_down() {
             "proximad is shutting down; reconnect (to another instance) to go on"};
 }
 
-// What a streaming call (StreamFrames, Review, VerifyModel, UploadObject) holds of its
+// What a streaming call (StreamFrames, Review, VerifyModel, FetchRegion, UploadObject) holds of its
 // principal: the call's place among the principal's max-streams, given back when the reactor is
 // deleted.
 class StreamAdmission {

@@ -7,7 +7,8 @@
 //   proxima load --server ADDR [--server ADDR ...] [--duration 30s] [--warmup 2s]
 //                [--clients sim=N,frames=N,review=N,verify=N] [--scene S[,S...]]
 //                [--queries Q[,Q...]] [--tolerance D] [--rate FPS] [--episode-frames N]
-//                [--frames DIR ...] [--model NAME] [--edit-every N] [--metrics URL ...]
+//                [--frames DIR ...] [--sequence DIR ...] [--model NAME] [--edit-every N]
+//                [--metrics URL ...]
 //                [--max-calls N] [--plot FILE.png] [--json | --out FILE] [--quiet]
 //
 // Client kinds (docs/load.md):
@@ -21,11 +22,17 @@
 //           every other reviewer moves an object every N-th step (review_edit: until the room's
 //           edit_applied comes back).
 //   verify  static verification of the whole model (VerifyModel), one call after the other.
+//   play    a recorded sequence (--sequence DIR: numbered mesh files, an MD2 model, a sequence
+//           with topology changes from `proxima generate sequence`), played through the daemon
+//           as `proxima play --server` plays it (the same player: CreateScene with the first
+//           frame, play_scene; one stream, every frame a diff of the previous one, play_frame),
+//           then again from the start.
 // --rate FPS paces each sim, frames and review client (open loop: a call's latency runs from the
 // moment it was due, so a slow daemon is not hidden by the client waiting for it); 0 is closed
 // loop.
 
 #include <netdb.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <unistd.h>
@@ -60,7 +67,9 @@
 #include "cli/commands.hpp"
 #include "cli/id_map.hpp"
 #include "client/proxima_client.hpp"
+#include "common/player.hpp"
 #include "common/progress.hpp"
+#include "common/sequence.hpp"
 #include "proxima/scenes/procedural.hpp"
 
 namespace proxima::cli {
@@ -88,6 +97,7 @@ struct LoadArgs {
     std::string model;
     std::size_t edit_every = 10;
     std::vector<std::string> frame_dirs;
+    std::vector<std::string> sequence_dirs;
     std::vector<std::string> metrics;
     std::uint64_t max_calls = 1000000;
     std::string plot;
@@ -148,7 +158,8 @@ struct ClientMix {
     std::size_t frames = 0;
     std::size_t review = 0;
     std::size_t verify = 0;
-    std::size_t total() const { return sim + frames + review + verify; }
+    std::size_t play = 0;
+    std::size_t total() const { return sim + frames + review + verify + play; }
 };
 
 // "sim=8,review=4": the clients of each kind; the message for a bad one.
@@ -178,9 +189,11 @@ std::variant<ClientMix, std::string> parse_clients(const std::string& text) {
             mix.review = count;
         } else if (kind == "verify") {
             mix.verify = count;
+        } else if (kind == "play") {
+            mix.play = count;
         } else {
             return "--clients: unknown client kind '" + kind +
-                   "' (expected sim, frames, review or verify)";
+                   "' (expected sim, frames, review, verify or play)";
         }
     }
     if (mix.total() == 0) {
@@ -369,6 +382,16 @@ struct MetricsSample {
     std::array<std::optional<double>, SAMPLED.size()> values;
 };
 
+// This process's CPU time so far (user + system, every thread), seconds.
+double own_cpu_seconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    auto seconds = [](const timeval& t) {
+        return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) * 1e-6;
+    };
+    return seconds(u.ru_utime) + seconds(u.ru_stime);
+}
+
 // --- Recording ---------------------------------------------------------------------------------
 
 enum Kind : int {
@@ -379,12 +402,14 @@ enum Kind : int {
     review_join,
     review_pose,
     review_edit,
-    verify_model
+    verify_model,
+    play_scene,
+    play_frame
 };
-constexpr int KIND_COUNT = 8;
-const std::array<const char*, KIND_COUNT> KIND_NAMES = {"sim_scene",   "sim_frame",   "pair_scene",
-                                                        "pair_frame",  "review_join", "review_pose",
-                                                        "review_edit", "verify_model"};
+constexpr int KIND_COUNT = 10;
+const std::array<const char*, KIND_COUNT> KIND_NAMES = {
+    "sim_scene",   "sim_frame",   "pair_scene",   "pair_frame", "review_join",
+    "review_pose", "review_edit", "verify_model", "play_scene", "play_frame"};
 
 struct Call {
     double start = 0;          // seconds since the run began (when the call was due)
@@ -718,6 +743,52 @@ void run_pair(Shared& shared, Recorder& rec, const std::string& server, const Lo
         }
         (void)c.value()->delete_scene(scene->scene_id);
         if (!status.ok()) {
+            back_off(shared);
+        }
+    }
+}
+
+// --- Recorded sequences --------------------------------------------------------------------------
+
+// One recorded sequence played through the daemon by the player of `proxima play --server`, over
+// and over: the scene's creation is a play_scene call (the player's setup time), each frame a
+// play_frame call (its latency from the moment it was due: the player's send-to-answer time plus
+// how late --rate pacing sent it). A frame the player rejects (an answer that does not fit the
+// frame's objects) is an error like a failed call.
+void run_play(Shared& shared, Recorder& rec, const std::string& server,
+              const client::Sequence& sequence) {
+    auto c = connect_client(shared, server);
+    while (!c.ok() && rec.running()) {
+        rec.record(play_scene, Clock::now(), c.status());
+        back_off(shared);
+        c = connect_client(shared, server);
+    }
+    if (!c.ok()) {
+        return;
+    }
+    client::PlayOptions options;
+    options.queries = shared.queries.request;
+    options.ccd = shared.queries.ccd;
+    options.fps = shared.args->rate;
+    options.keep_results = false;
+    const Status run_over(StatusCode::cancelled, "the load run is over");
+    options.on_setup = [&](double setup_ms) {
+        const auto due = Clock::now() - std::chrono::duration_cast<Clock::duration>(
+                                            std::chrono::duration<double, std::milli>(setup_ms));
+        return rec.record(play_scene, due, {}) ? Status{} : run_over;
+    };
+    options.on_frame = [&](const client::PlayedFrame& f) {
+        const auto due =
+            Clock::now() - std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double, std::milli>(f.latency_ms + f.late_ms));
+        return rec.record(play_frame, due, {}) ? Status{} : run_over;
+    };
+    while (rec.running()) {
+        const auto started = Clock::now();
+        auto report = client::play_remote(*c.value(), sequence, options);
+        if (!report.ok() && !(report.status().code() == StatusCode::cancelled &&
+                              report.status().message() == run_over.message())) {
+            rec.record(play_frame, started, report.status());
             back_off(shared);
         }
     }
@@ -1080,7 +1151,7 @@ std::string ms_text(const nlohmann::json& ns) {
 
 std::string clients_text(const nlohmann::json& doc) {
     std::string out;
-    for (const char* kind : {"sim", "frames", "review", "verify"}) {
+    for (const char* kind : {"sim", "frames", "review", "verify", "play"}) {
         if (doc["clients"].value(kind, 0) > 0) {
             out += (out.empty() ? "" : ",") + std::string(kind) + "=" +
                    std::to_string(doc["clients"][kind].get<int>());
@@ -1156,6 +1227,12 @@ void print_summary(const nlohmann::json& doc) {
                     number_text(s["cache_hits"], "%.0f").c_str(),
                     number_text(s["cache_misses"], "%.0f").c_str());
     }
+    const auto& h = doc["harness"];
+    std::printf("harness: %s threads, CPU %s s (%s cores), RSS max %s\n",
+                std::to_string(h["threads"].get<std::uint64_t>()).c_str(),
+                number_text(h["cpu_seconds"], "%.2f").c_str(),
+                number_text(h["cpu_cores"], "%.2f").c_str(),
+                client::format_amount(h["rss_bytes_max"].get<double>(), "bytes").c_str());
 }
 
 // --- Plot --------------------------------------------------------------------------------------
@@ -1351,6 +1428,23 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
                            "frames clients need --frames DIR (two frames of a simulation, e.g. "
                            "../shared/data/frames/cloth-ball)");
     }
+    if (clients.play > 0 && args.sequence_dirs.empty()) {
+        return usage_error(command,
+                           "play clients need --sequence DIR (a folder of numbered mesh files, an "
+                           "MD2 model, or `proxima generate sequence` output)");
+    }
+    std::vector<client::Sequence> sequences;
+    for (const auto& dir : clients.play > 0 ? args.sequence_dirs : std::vector<std::string>{}) {
+        // Each file's connected components are its objects, as for the frames clients (and as
+        // `proxima play --split-components` reads it).
+        client::SequenceOptions read;
+        read.split_components = true;
+        auto loaded = client::load_sequence(dir, read);
+        if (!loaded.ok()) {
+            return fail(loaded.status());
+        }
+        sequences.push_back(std::move(loaded).value());
+    }
     std::vector<LoadedPair> pairs;
     if (clients.frames > 0) {
         auto loaded = load_pairs(args.frame_dirs);
@@ -1471,11 +1565,21 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
             run_verify(sh, rec, args.servers[server], models[server]);
         });
     }
+    for (std::size_t i = 0; i < clients.play; ++i) {
+        spawn([&sh, &args, &sequences, i](Recorder& rec, std::size_t server) {
+            run_play(sh, rec, args.servers[server], sequences[i % sequences.size()]);
+        });
+    }
 
     // A progress line once a second until the end (or every client reached its share of calls).
     const bool tty = isatty(fileno(stderr)) != 0;
     std::array<std::uint64_t, KIND_COUNT> before{};
     bool ended_by_count = false;
+    // The harness's own CPU over the measured part: from the first tick at or after the warm-up.
+    std::optional<std::pair<Clock::time_point, double>> cpu_from;
+    if (*warmup <= 0) {
+        cpu_from.emplace(sh.start, own_cpu_seconds());
+    }
     for (int second = 1;; ++second) {
         const auto tick = std::min(sh.end, sh.start + std::chrono::seconds(second));
         bool all_done = false;
@@ -1501,11 +1605,15 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
             std::fprintf(stderr, tty ? "\r%s\033[K" : "%s\n", line.c_str());
             std::fflush(stderr);
         }
+        if (!cpu_from && sh.since_start(tick) >= *warmup - 1e-6) {
+            cpu_from.emplace(tick, own_cpu_seconds());
+        }
         if (tick >= sh.end || all_done) {
             ended_by_count = all_done;
             break;
         }
     }
+    const auto cpu_to = std::make_pair(Clock::now(), own_cpu_seconds());
     {
         std::lock_guard lock(sh.mu);
         sh.stop = true;
@@ -1564,12 +1672,18 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     doc["clients"] = {{"sim", clients.sim},
                       {"frames", clients.frames},
                       {"review", clients.review},
-                      {"verify", clients.verify}};
+                      {"verify", clients.verify},
+                      {"play", clients.play}};
     nlohmann::json pair_names = nlohmann::json::array();
     for (const auto& p : pairs) {
         pair_names.push_back(p.name);
     }
     doc["frame_pairs"] = pair_names;
+    nlohmann::json sequence_names = nlohmann::json::array();
+    for (const auto& q : sequences) {
+        sequence_names.push_back(q.dir);
+    }
+    doc["sequences"] = sequence_names;
     doc["sim_scenes"] = scene_names;
     doc["sim_queries"] = sh.queries.names;
     doc["tolerance"] = args.tolerance;
@@ -1584,6 +1698,23 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     doc["kinds"] = kinds;
     doc["timeline"] = timeline_json(all, *duration);
     doc["metrics"] = metrics_json(targets, samples, scrape_failures, *warmup);
+    {
+        // The harness's share of the machine: CPU seconds per second of the measured part (a
+        // run that ended before the warm-up did has none).
+        nlohmann::json harness = {
+            {"threads", clients.total() + 1}, {"cpu_seconds", nullptr}, {"cpu_cores", nullptr}};
+        if (cpu_from) {
+            const double cpu = cpu_to.second - cpu_from->second;
+            const double wall =
+                std::chrono::duration<double>(cpu_to.first - cpu_from->first).count();
+            harness["cpu_seconds"] = cpu;
+            harness["cpu_cores"] = wall > 0 ? nlohmann::json(cpu / wall) : nlohmann::json(nullptr);
+        }
+        rusage u{};
+        getrusage(RUSAGE_SELF, &u);
+        harness["rss_bytes_max"] = static_cast<std::uint64_t>(u.ru_maxrss) * 1024U;
+        doc["harness"] = harness;
+    }
 
     if (!args.plot.empty()) {
         if (Status s = write_plot(doc, args.plot, gnuplot); !s.ok()) {
@@ -1628,8 +1759,8 @@ void add_load_command(CLI::App& app, int& exit_code) {
         ->check(duration_text(true))
         ->capture_default_str();
     load->add_option("--clients", args->clients,
-                     "Clients of each kind: sim=N,frames=N,review=N,verify=N (at most 256 in "
-                     "all)")
+                     "Clients of each kind: sim=N,frames=N,review=N,verify=N,play=N (at most 256 "
+                     "in all)")
         ->capture_default_str();
     load->add_option("--scene", args->scenes,
                      "Sim clients' seed scenes, one per client in turn: all, or skirt, "
@@ -1645,8 +1776,8 @@ void add_load_command(CLI::App& app, int& exit_code) {
         ->capture_default_str();
     load->add_option(
             "--rate", args->rate,
-            "Calls per second of each sim, frames and review client (open loop); 0: as fast "
-            "as answered (closed loop)")
+            "Calls per second of each sim, frames, review and play client (open loop); 0: as "
+            "fast as answered (closed loop)")
         ->check(non_negative_number())
         ->capture_default_str();
     load->add_option("--episode-frames", args->episode_frames,
@@ -1656,6 +1787,11 @@ void add_load_command(CLI::App& app, int& exit_code) {
     load->add_option("--frames", args->frame_dirs,
                      "Frames clients' real frame pairs: a directory with two mesh files (t0, t1), "
                      "or a directory of such directories (../shared/data/frames); repeatable")
+        ->type_name("DIR");
+    load->add_option("--sequence", args->sequence_dirs,
+                     "Play clients' recorded sequences, one per client in turn: a folder of "
+                     "numbered mesh files, an MD2 model, or `proxima generate sequence` output "
+                     "(as `proxima play` takes them); repeatable")
         ->type_name("DIR");
     load->add_option("--model", args->model,
                      "Review and verify clients' model (default: the first one served)");

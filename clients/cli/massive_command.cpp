@@ -9,6 +9,9 @@
 //   proxima review (--store DIR | --server ADDR --model NAME) --avatar MESHFILE --path PATHFILE
 //                  [--room R] [--member NAME] [--tolerance D] [--no-nearest] [--cache-bytes M]
 //                  [--json | --out FILE] [--quiet]
+//   proxima region --server ADDR --model NAME [--center X,Y,Z] [--radius R] [--room R]
+//                  [--objects I,J,...] [--max-triangles N] [--float64] [--obj FILE]
+//                  [--json | --out FILE] [--quiet]
 //
 // A path file has one avatar pose per line: 12 numbers, the row-major 3x4 affine map
 // (a00 a01 a02 tx a10 a11 a12 ty a20 a21 a22 tz) applied to the avatar's own coordinates, or 3
@@ -29,6 +32,7 @@
 #include <sstream>
 #include <string>
 #include <tuple>
+#include <variant>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -647,6 +651,119 @@ int run_review(const ReviewArgs& args) {
     return run_review_local(args, avatar.value(), poses.value(), cache_bytes);
 }
 
+// --- region ------------------------------------------------------------------------------------
+
+struct RegionArgs {
+    std::string server;
+    ServerFlags server_flags;
+    std::string model;
+    std::vector<double> center{0.0, 0.0, 0.0};
+    double radius = 0.0;
+    std::string room;
+    std::vector<std::uint32_t> objects;
+    std::uint64_t max_triangles = 0;
+    bool float64 = false;
+    std::string obj;
+    JsonOutput output;
+    bool quiet = false;
+};
+
+int run_region(const RegionArgs& args) {
+    if (args.center.size() != 3) {
+        return fail(invalid_argument("--center is three numbers X,Y,Z"));
+    }
+    std::FILE* obj = nullptr;
+    if (!args.obj.empty()) {
+        obj = std::fopen(args.obj.c_str(), "w");
+        if (obj == nullptr) {
+            return fail(Status(StatusCode::unavailable, "cannot write " + args.obj));
+        }
+        std::fprintf(obj, "# proxima region: model %s%s%s\n", args.model.c_str(),
+                     args.room.empty() ? "" : " room ", args.room.c_str());
+    }
+    auto c = connect(args.server, args.server_flags);
+    if (!c.ok()) {
+        if (obj != nullptr) {
+            std::fclose(obj);
+        }
+        return fail(c.status());
+    }
+    client::RegionRequest request;
+    request.model = args.model;
+    request.center = {args.center[0], args.center[1], args.center[2]};
+    request.radius = args.radius;
+    request.room = args.room;
+    request.objects = args.objects;
+    request.max_triangles = args.max_triangles;
+    request.float64 = args.float64;
+    client::ProgressPrinter printer(args.quiet);
+    nlohmann::json pieces = nlohmann::json::array();
+    unsigned long long next_vertex = 1;  // OBJ indices start at 1 and run over the whole file
+    const auto start = Clock::now();
+    auto summary = c.value()->fetch_region(request, [&](const client::RegionEvent& e) {
+        if (const auto* g = std::get_if<client::RegionProgress>(&e)) {
+            printer.update({"fetching", g->triangles_sent, g->triangles_total, "triangles"});
+            return true;
+        }
+        const auto* p = std::get_if<client::RegionPiece>(&e);
+        if (p == nullptr) {
+            return true;
+        }
+        pieces.push_back({{"object", p->object},
+                          {"name", p->object_name},
+                          {"distance", p->distance},
+                          {"vertex_count", p->vertices.size()},
+                          {"triangle_count", p->triangles.size()},
+                          {"box", client::box_json(p->box)}});
+        if (obj != nullptr) {
+            // One OBJ object per piece; its triangles' ids in their object on a comment line
+            // before its faces (in face order).
+            std::fprintf(obj, "o %s\n# object %u distance %.17g\n# triangle_ids",
+                         p->object_name.c_str(), p->object, p->distance);
+            for (auto id : p->triangle_ids) {
+                std::fprintf(obj, " %u", id);
+            }
+            std::fprintf(obj, "\n");
+            for (const auto& v : p->vertices) {
+                std::fprintf(obj, "v %.17g %.17g %.17g\n", v.x, v.y, v.z);
+            }
+            for (const auto& f : p->triangles) {
+                std::fprintf(obj, "f %llu %llu %llu\n", next_vertex + f[0], next_vertex + f[1],
+                             next_vertex + f[2]);
+            }
+            next_vertex += p->vertices.size();
+        }
+        return true;
+    });
+    printer.finish();
+    if (obj != nullptr && std::fclose(obj) != 0 && summary.ok()) {
+        return fail(Status(StatusCode::unavailable, "cannot write " + args.obj));
+    }
+    if (!summary.ok()) {
+        return fail(summary.status());
+    }
+    nlohmann::json doc = {{"server", args.server},
+                          {"model", args.model},
+                          {"room", args.room},
+                          {"center", args.center},
+                          {"radius", args.radius},
+                          {"max_triangles", args.max_triangles},
+                          {"generation", summary->generation},
+                          {"model_version", summary->model_version},
+                          {"piece_count", summary->pieces},
+                          {"triangle_count", summary->triangles},
+                          {"truncated", summary->truncated},
+                          {"pieces", pieces},
+                          {"server_seconds", summary->server_seconds},
+                          {"wall_seconds", seconds_since(start)}};
+    if (!args.obj.empty()) {
+        doc["obj"] = args.obj;
+    }
+    return emit_json(doc, args.output,
+                     "region: " + std::to_string(summary->pieces) + " pieces, " +
+                         std::to_string(summary->triangles) + " triangles");
+}
+
 }  // namespace
 
 void add_massive_commands(CLI::App& app, int& exit_code) {
@@ -750,6 +867,37 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
         }
         exit_code = run_review(*review_args);
     });
+
+    auto region_args = std::make_shared<RegionArgs>();
+    auto* region = app.add_subcommand(
+        "region",
+        "The pieces of a served massive model near a point, nearest first (FetchRegion): JSON "
+        "on standard output or --out FILE, the geometry with --obj FILE");
+    region->add_option("--server", region_args->server, "The daemon's HOST:PORT")->required();
+    add_server_flags(*region, region_args->server_flags);
+    region->add_option("--model", region_args->model, "The model's name")->required();
+    region->add_option("--center", region_args->center, "The point X,Y,Z (default 0,0,0)")
+        ->delimiter(',')
+        ->expected(3);
+    region
+        ->add_option("--radius", region_args->radius,
+                     "Pieces whose boxes come within this distance (0: every piece)")
+        ->check(non_negative_number())
+        ->capture_default_str();
+    region->add_option("--room", region_args->room, "A review room's edited view of the model");
+    region->add_option("--objects", region_args->objects, "Only these object indices (I,J,...)")
+        ->delimiter(',');
+    region
+        ->add_option("--max-triangles", region_args->max_triangles,
+                     "Stop after the nearest pieces up to this many triangles (0: no limit)")
+        ->capture_default_str();
+    region->add_flag("--float64", region_args->float64,
+                     "Exact float64 coordinates (default: float32 on the wire)");
+    region->add_option("--obj", region_args->obj,
+                       "Write the pieces' geometry to this Wavefront OBJ file");
+    add_json_output(*region, region_args->output, true);
+    region->add_flag("--quiet", region_args->quiet, "No progress on standard error");
+    region->callback([region_args, &exit_code] { exit_code = run_region(*region_args); });
 }
 
 }  // namespace proxima::cli

@@ -17,6 +17,7 @@
 #include <thread>
 #include <unordered_map>
 #include <utility>
+#include <variant>
 
 #include <grpcpp/grpcpp.h>
 
@@ -892,6 +893,71 @@ StatusOr<RemoteVerifySummary> Client::verify_model(
     }
     if (!summary) {
         return Status(StatusCode::internal, "the server ended VerifyModel without a summary");
+    }
+    return *summary;
+}
+
+StatusOr<RegionSummary> Client::fetch_region(
+    const RegionRequest& region, const std::function<bool(const RegionEvent&)>& on_event,
+    std::chrono::milliseconds timeout) {
+    pb::FetchRegionRequest request;
+    wire::encode_region_request(region, &request);
+    std::optional<RegionSummary> summary;
+    bool stopped = false;
+    Status malformed;
+    // A region fetch only reads, so a call that failed before the caller saw any event is
+    // repeated; after one, a repeat would hand out the same pieces again.
+    bool delivered = false;
+    Status status = m_impl->with_retries(
+        m_impl->options.retry, "FetchRegion", Retry::idempotent,
+        [&] {
+            grpc::ClientContext context;
+            // A room's view lives on the daemon its members meet on: the room's name is the
+            // route (as for join_review), unless the caller chose one.
+            m_impl->prepare(
+                context, false,
+                m_impl->explicit_route || region.room.empty() ? std::string() : region.room);
+            if (timeout.count() > 0) {
+                context.set_deadline(deadline_after(timeout));
+            }
+            const auto stub = m_impl->stub_now();  // held until Finish, like the channel
+            auto reader = stub->FetchRegion(&context, request);
+            pb::RegionEvent event;
+            while (reader->Read(&event)) {
+                if (stopped) {
+                    continue;  // cancelled: drain what is in flight until the call ends
+                }
+                auto decoded = wire::decode_region_event(event);
+                if (!decoded.ok()) {
+                    malformed = decoded.status();
+                    stopped = true;
+                    context.TryCancel();
+                    continue;
+                }
+                if (auto* s = std::get_if<RegionSummary>(&decoded.value())) {
+                    summary = std::move(*s);
+                    continue;
+                }
+                delivered = true;
+                if (on_event && !on_event(decoded.value())) {
+                    stopped = true;
+                    context.TryCancel();
+                }
+            }
+            return from_grpc(reader->Finish());
+        },
+        &delivered);
+    if (!malformed.ok()) {
+        return malformed;
+    }
+    if (stopped) {
+        return Status(StatusCode::cancelled, "region fetch cancelled by the caller");
+    }
+    if (!status.ok()) {
+        return status;
+    }
+    if (!summary) {
+        return Status(StatusCode::internal, "the server ended FetchRegion without a summary");
     }
     return *summary;
 }

@@ -15,6 +15,7 @@
 #include "proxima/ccd/frame_ccd.hpp"
 #include "proxima/frame.hpp"
 #include "proxima/massive/avatar.hpp"
+#include "proxima/massive/region.hpp"
 #include "proxima/massive/review.hpp"
 #include "proxima/massive/verify.hpp"
 #include "proxima/query/penetration.hpp"
@@ -274,6 +275,17 @@ struct ReviewEvent {
     std::string member;       // kind == member_joined / member_left
 };
 
+// A region of a model for viewers (FetchRegion; fields: model, center, radius (0: the whole
+// model), room (its edited view), objects (only these), max_triangles, float64), and what the
+// daemon streams back: pieces (nearest first; vertices, triangles, each triangle's id in its
+// whole object, box, distance), progress, and the summary last. The engine's types
+// (proxima/massive/region.hpp), shared with the daemon and proto/wire.
+using RegionRequest = massive::RegionRequest;
+using RegionPiece = massive::RegionPiece;
+using RegionProgress = massive::RegionProgress;
+using RegionSummary = massive::RegionSummary;
+using RegionEvent = massive::RegionEvent;  // a RegionPiece or a RegionProgress (or the summary)
+
 class FrameStream;
 class ReviewSession;
 
@@ -309,6 +321,13 @@ class Client {
     StatusOr<RemoteVerifySummary> verify_model(
         const std::string& model, double tolerance,
         const std::function<bool(const VerifyEvent&)>& on_event = {},
+        std::chrono::milliseconds timeout = std::chrono::milliseconds(0));
+    // A region of a model (FetchRegion). Each piece and progress event goes to `on_event` as it
+    // arrives (returning false cancels the call: the answer is then `cancelled`); the summary is
+    // returned. Repeated on UNAVAILABLE only until the caller has seen an event. `timeout` 0: no
+    // deadline.
+    StatusOr<RegionSummary> fetch_region(
+        const RegionRequest& request, const std::function<bool(const RegionEvent&)>& on_event = {},
         std::chrono::milliseconds timeout = std::chrono::milliseconds(0));
     // Joins (or creates) a review room: sends the join and waits up to `timeout` for the
     // daemon's `joined` (the members and their last poses), or its error.

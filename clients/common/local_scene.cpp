@@ -10,6 +10,40 @@
 
 namespace proxima::client {
 
+void split_objects(const std::string& file, TriangleMesh mesh,
+                   std::vector<std::uint32_t> file_vertex, bool split_components,
+                   std::vector<InputObject>& out) {
+    if (file_vertex.empty()) {
+        file_vertex.resize(mesh.vertices.size());
+        std::iota(file_vertex.begin(), file_vertex.end(), 0u);
+    }
+    if (!split_components) {
+        InputObject obj;
+        obj.file = file;
+        obj.mesh.name = file;
+        obj.file_triangle.resize(mesh.triangles.size());
+        std::iota(obj.file_triangle.begin(), obj.file_triangle.end(), 0u);
+        obj.file_vertex = std::move(file_vertex);
+        obj.mesh.mesh = std::move(mesh);
+        out.push_back(std::move(obj));
+        return;
+    }
+    auto split = proxima::split_components(mesh);
+    for (std::size_t c = 0; c < split.meshes.size(); ++c) {
+        InputObject obj;
+        obj.file = file;
+        obj.component = static_cast<std::int64_t>(c);
+        obj.mesh.name = file + "#" + std::to_string(c);
+        obj.mesh.mesh = std::move(split.meshes[c]);
+        obj.file_triangle = std::move(split.triangle_ids[c]);
+        obj.file_vertex.reserve(split.vertex_ids[c].size());
+        for (const auto v : split.vertex_ids[c]) {
+            obj.file_vertex.push_back(file_vertex[v]);
+        }
+        out.push_back(std::move(obj));
+    }
+}
+
 StatusOr<std::vector<InputObject>> load_objects(const std::vector<std::string>& files,
                                                 bool split_components, WeldMode weld) {
     std::vector<InputObject> out;
@@ -21,31 +55,7 @@ StatusOr<std::vector<InputObject>> load_objects(const std::vector<std::string>& 
         if (!mesh.ok()) {
             return mesh.status();
         }
-        if (!split_components) {
-            InputObject obj;
-            obj.file = file;
-            obj.mesh.name = file;
-            obj.file_triangle.resize(mesh->triangles.size());
-            std::iota(obj.file_triangle.begin(), obj.file_triangle.end(), 0u);
-            obj.file_vertex = std::move(file_vertex);
-            obj.mesh.mesh = std::move(mesh).value();
-            out.push_back(std::move(obj));
-            continue;
-        }
-        auto split = proxima::split_components(mesh.value());
-        for (std::size_t c = 0; c < split.meshes.size(); ++c) {
-            InputObject obj;
-            obj.file = file;
-            obj.component = static_cast<std::int64_t>(c);
-            obj.mesh.name = file + "#" + std::to_string(c);
-            obj.mesh.mesh = std::move(split.meshes[c]);
-            obj.file_triangle = std::move(split.triangle_ids[c]);
-            obj.file_vertex.reserve(split.vertex_ids[c].size());
-            for (const auto v : split.vertex_ids[c]) {
-                obj.file_vertex.push_back(file_vertex[v]);
-            }
-            out.push_back(std::move(obj));
-        }
+        split_objects(file, std::move(mesh).value(), std::move(file_vertex), split_components, out);
     }
     return out;
 }

@@ -25,6 +25,14 @@ struct InputObject {
     std::vector<std::uint32_t> file_vertex;
 };
 
+// The objects of one mesh read from `file`: the whole mesh, or each connected component in the
+// order of its first triangle (named FILE#C), with their maps back to the file's triangles and
+// vertices. `file_vertex` maps the mesh's vertices to the file's (read_mesh's; empty: the
+// identity).
+void split_objects(const std::string& file, TriangleMesh mesh,
+                   std::vector<std::uint32_t> file_vertex, bool split_components,
+                   std::vector<InputObject>& out);
+
 // Reads every file; `weld` as MeshReadOptions::weld (the default welds triangle soups only).
 StatusOr<std::vector<InputObject>> load_objects(const std::vector<std::string>& files,
                                                 bool split_components,

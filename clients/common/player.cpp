@@ -269,6 +269,11 @@ StatusOr<PlayReport> play_remote(Client& client, const Sequence& sequence,
         const std::string& id;
         ~DeleteScene() { (void)c.delete_scene(id); }
     } delete_scene{client, scene_id};
+    if (options.on_setup) {
+        if (Status st = options.on_setup(report.setup_ms); !st.ok()) {
+            return st;
+        }
+    }
 
     std::vector<ObjectId> ids;
     for (const auto& o : scene->objects) {

@@ -45,6 +45,9 @@ struct PlayOptions {
     bool keep_results = true;
     // play_local: called on the engine before the first frame (a GPU backend, ...).
     std::function<void(ProximityEngine&)> prepare_engine;
+    // play_remote: called once the scene holds the first frame's objects, with the time that
+    // took (PlayReport::setup_ms); a failure stops the run with that status.
+    std::function<Status(double setup_ms)> on_setup;
     // Called after each frame, in order; a failure stops the run with that status.
     std::function<Status(const PlayedFrame&)> on_frame;
 };

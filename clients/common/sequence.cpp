@@ -181,31 +181,11 @@ StatusOr<std::vector<std::string>> list_frame_files(const std::string& dir) {
 
 namespace {
 
-// One keyframe's objects: the whole model, or each connected component (as load_objects does).
+// One keyframe's objects: the whole model, or each connected component (as load_objects does;
+// an MD2 keyframe's vertices are the model's own, so the vertex map is the identity).
 std::vector<InputObject> keyframe_objects(const std::string& file, TriangleMesh mesh, bool split) {
     std::vector<InputObject> out;
-    if (!split) {
-        InputObject obj;
-        obj.file = file;
-        obj.mesh.name = file;
-        obj.file_triangle.resize(mesh.triangles.size());
-        for (std::size_t t = 0; t < obj.file_triangle.size(); ++t) {
-            obj.file_triangle[t] = static_cast<std::uint32_t>(t);
-        }
-        obj.mesh.mesh = std::move(mesh);
-        out.push_back(std::move(obj));
-        return out;
-    }
-    auto parts = proxima::split_components(mesh);
-    for (std::size_t c = 0; c < parts.meshes.size(); ++c) {
-        InputObject obj;
-        obj.file = file;
-        obj.component = static_cast<std::int64_t>(c);
-        obj.mesh.name = file + "#" + std::to_string(c);
-        obj.mesh.mesh = std::move(parts.meshes[c]);
-        obj.file_triangle = std::move(parts.triangle_ids[c]);
-        out.push_back(std::move(obj));
-    }
+    split_objects(file, std::move(mesh), {}, split, out);
     return out;
 }
 

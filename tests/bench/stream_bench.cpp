@@ -1,7 +1,11 @@
 // proxima_stream_bench: what the frame stream costs on loopback, apart from the geometry work.
 //   1. Round-trip overhead per frame: one deforming sheet of 15K or 150K vertices, lockstep
 //      frames that only update positions (no query), float32 and float64 buffers; overhead =
-//      client round trip - the server's own time (decode, validate, apply, encode).
+//      client round trip - the server's own time (decode, validate, apply, encode). In the same
+//      run, interleaved frame by frame, the gRPC floor: a bare bidi stream to a generic echo
+//      server (this program with --echo-server, another process like the daemon) carrying the
+//      same bytes (the serialized Frame): `echo` answers with the same bytes, `ack` with an
+//      empty message (the daemon's answer to such a frame is a few dozen bytes).
 //   2. Throughput: 1, 8 and 32 concurrent streams, each its own scene (the 'bowl' scene,
 //      separation query), lockstep frames for a fixed time; total frames per second.
 // Starts its own proximad on 127.0.0.1:0. `--quick` is the CI smoke run.
@@ -19,18 +23,26 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <grpcpp/generic/async_generic_service.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+
 #include "client/proxima_client.hpp"
 #include "proxima/scenes/procedural.hpp"
+#include "proxima/v1/proxima.pb.h"
+#include "proxima/wire/frames.hpp"
 
 namespace {
 
 using namespace proxima;
 using Clock = std::chrono::steady_clock;
 
+// A child process (proximad, or this program as the echo server) that prints "listening on
+// HOST:PORT" as its first line; SIGTERM at the end.
 struct Daemon {
     pid_t pid = -1;
     std::string address;
-    Daemon() {
+    explicit Daemon(const char* echo_self = nullptr) {
         int out[2];
         if (pipe(out) != 0) {
             std::perror("pipe");
@@ -41,9 +53,13 @@ struct Daemon {
             dup2(out[1], STDOUT_FILENO);
             close(out[0]);
             close(out[1]);
-            execl(PROXIMAD_PATH, PROXIMAD_PATH, "--listen", "127.0.0.1:0", "--log-level", "warn",
-                  static_cast<char*>(nullptr));
-            std::perror("exec proximad");
+            if (echo_self != nullptr) {
+                execl(echo_self, echo_self, "--echo-server", static_cast<char*>(nullptr));
+            } else {
+                execl(PROXIMAD_PATH, PROXIMAD_PATH, "--listen", "127.0.0.1:0", "--log-level",
+                      "warn", static_cast<char*>(nullptr));
+            }
+            std::perror("exec");
             _exit(127);
         }
         close(out[1]);
@@ -55,7 +71,8 @@ struct Daemon {
         close(out[0]);
         const std::string prefix = "listening on ";
         if (line.rfind(prefix, 0) != 0) {
-            std::fprintf(stderr, "proximad did not start (first line: '%s')\n", line.c_str());
+            std::fprintf(stderr, "%s did not start (first line: '%s')\n",
+                         echo_self != nullptr ? "the echo server" : "proximad", line.c_str());
             std::exit(1);
         }
         address = line.substr(prefix.size());
@@ -68,6 +85,129 @@ struct Daemon {
         }
     }
 };
+
+// --- The gRPC floor: a generic echo server and its lockstep client ----------------------------
+
+constexpr const char* ECHO_METHOD = "/bench.Echo/Echo";  // answers with the same bytes
+constexpr const char* ACK_METHOD = "/bench.Echo/Ack";    // answers with an empty message
+
+class EchoReactor : public grpc::ServerGenericBidiReactor {
+  public:
+    explicit EchoReactor(bool ack) : m_ack(ack) { StartRead(&m_in); }
+    void OnReadDone(bool ok) override {
+        if (!ok) {
+            Finish(grpc::Status::OK);
+            return;
+        }
+        if (m_ack) {
+            grpc::Slice empty("", 0);
+            m_out = grpc::ByteBuffer(&empty, 1);
+        } else {
+            m_out = m_in;
+        }
+        StartWrite(&m_out);
+    }
+    void OnWriteDone(bool ok) override {
+        if (!ok) {
+            Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "write failed"));
+            return;
+        }
+        StartRead(&m_in);
+    }
+    void OnDone() override { delete this; }
+
+  private:
+    bool m_ack;
+    grpc::ByteBuffer m_in;
+    grpc::ByteBuffer m_out;
+};
+
+class EchoService : public grpc::CallbackGenericService {
+    grpc::ServerGenericBidiReactor* CreateReactor(
+        grpc::GenericCallbackServerContext* context) override {
+        return new EchoReactor(context->method() == ACK_METHOD);
+    }
+};
+
+int run_echo_server() {
+    EchoService service;
+    grpc::ServerBuilder builder;
+    int port = 0;
+    builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+    builder.SetMaxReceiveMessageSize(-1);
+    builder.SetMaxSendMessageSize(-1);
+    builder.RegisterCallbackGenericService(&service);
+    auto server = builder.BuildAndStart();
+    if (!server || port == 0) {
+        std::fprintf(stderr, "echo server: cannot listen\n");
+        return 1;
+    }
+    std::printf("listening on 127.0.0.1:%d\n", port);
+    std::fflush(stdout);
+    server->Wait();  // until SIGTERM ends the process
+    return 0;
+}
+
+// One lockstep bidi stream to the echo server (completion-queue API, no thread of its own).
+class EchoClient {
+  public:
+    EchoClient(const std::shared_ptr<grpc::Channel>& channel, const char* method)
+        : m_stub(channel) {
+        m_call = m_stub.PrepareCall(&m_context, method, &m_cq);
+        m_call->StartCall(tag(1));
+        check(wait(), "start");
+    }
+    ~EchoClient() {
+        m_call->WritesDone(tag(4));
+        (void)wait();
+        grpc::Status status;
+        m_call->Finish(&status, tag(5));
+        (void)wait();
+        m_cq.Shutdown();
+        void* t = nullptr;
+        bool ok = false;
+        while (m_cq.Next(&t, &ok)) {
+        }
+    }
+    EchoClient(const EchoClient&) = delete;
+    EchoClient& operator=(const EchoClient&) = delete;
+
+    // Milliseconds from writing `payload` to having read the answer.
+    double round_trip(const grpc::ByteBuffer& payload) {
+        const auto t0 = Clock::now();
+        m_call->Write(payload, tag(2));
+        check(wait(), "write");
+        m_call->Read(&m_in, tag(3));
+        check(wait(), "read");
+        return std::chrono::duration<double>(Clock::now() - t0).count() * 1e3;
+    }
+
+  private:
+    static void* tag(std::intptr_t n) { return reinterpret_cast<void*>(n); }
+    bool wait() {
+        void* t = nullptr;
+        bool ok = false;
+        return m_cq.Next(&t, &ok) && ok;
+    }
+    static void check(bool ok, const char* what) {
+        if (!ok) {
+            std::fprintf(stderr, "echo stream: %s failed\n", what);
+            std::exit(1);
+        }
+    }
+    grpc::GenericStub m_stub;
+    grpc::CompletionQueue m_cq;
+    grpc::ClientContext m_context;
+    std::unique_ptr<grpc::GenericClientAsyncReaderWriter> m_call;
+    grpc::ByteBuffer m_in;
+};
+
+std::shared_ptr<grpc::Channel> echo_channel(const std::string& address) {
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(-1);
+    args.SetMaxSendMessageSize(-1);
+    return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+}
 
 TriangleMesh sheet(int nx, int ny) {
     TriangleMesh m;
@@ -95,7 +235,8 @@ double percentile(std::vector<double> v, double p) {
     return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
 }
 
-void overhead(const std::string& address, int nx, int ny, bool f32, int frames) {
+void overhead(const std::string& address, const std::string& echo_address, int nx, int ny, bool f32,
+              int frames) {
     client::ConnectOptions opts;
     opts.float32_vertices = f32;
     opts.inline_mesh_bytes = 64u << 20;
@@ -116,7 +257,11 @@ void overhead(const std::string& address, int nx, int ny, bool f32, int frames) 
         std::fprintf(stderr, "stream: %s\n", stream.status().to_string().c_str());
         std::exit(1);
     }
-    std::vector<double> rtt, over, server;
+    auto channel = echo_channel(echo_address);
+    EchoClient echo(channel, ECHO_METHOD);
+    EchoClient ack(channel, ACK_METHOD);
+    std::vector<double> rtt, over, server, echo_ms, ack_ms;
+    std::size_t frame_bytes = 0;
     for (int k = 0; k < frames; ++k) {
         client::FrameRequest f;
         f.frame = static_cast<std::uint64_t>(k);
@@ -126,6 +271,13 @@ void overhead(const std::string& address, int nx, int ny, bool f32, int frames) 
             p.z = 0.001 * std::sin(0.1 * k + p.x);
         }
         f.update.positions.push_back({id, std::move(v)});
+        // The floor's payload: the same frame as the client library puts it on the wire.
+        proxima::v1::Frame message;
+        wire::encode_frame(f, scene->scene_id, f32, &message);
+        const std::string bytes = message.SerializeAsString();
+        frame_bytes = bytes.size();
+        grpc::Slice slice(bytes);
+        const grpc::ByteBuffer payload(&slice, 1);
         // Building the frame is the simulator's work, not the stream's: start the clock here.
         const auto t0 = Clock::now();
         if (Status s = stream.value()->send(f); !s.ok()) {
@@ -138,17 +290,24 @@ void overhead(const std::string& address, int nx, int ny, bool f32, int frames) 
             std::fprintf(stderr, "receive: %s\n", r.status().to_string().c_str());
             std::exit(1);
         }
+        const double e = echo.round_trip(payload);
+        const double a = ack.round_trip(payload);
         if (k >= 3) {  // warm-up frames excluded
             rtt.push_back(dt * 1e3);
             server.push_back(r->server_seconds * 1e3);
             over.push_back((dt - r->server_seconds) * 1e3);
+            echo_ms.push_back(e);
+            ack_ms.push_back(a);
         }
     }
     (void)stream.value()->finish();
     (void)c.value()->delete_scene(scene->scene_id);
-    std::printf("| %zu | %s | %.3f | %.3f | %.3f | %.3f |\n", mesh.vertices.size(),
-                f32 ? "float32" : "float64", percentile(rtt, 0.5), percentile(server, 0.5),
-                percentile(over, 0.5), percentile(over, 0.99));
+    const double over50 = percentile(over, 0.5);
+    std::printf("| %zu | %s | %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2fx | %.2fx |\n",
+                mesh.vertices.size(), f32 ? "float32" : "float64", frame_bytes,
+                percentile(rtt, 0.5), percentile(server, 0.5), over50, percentile(over, 0.99),
+                percentile(echo_ms, 0.5), percentile(ack_ms, 0.5),
+                over50 / percentile(echo_ms, 0.5), over50 / percentile(ack_ms, 0.5));
 }
 
 void throughput(const std::string& address, int streams, double seconds) {
@@ -231,24 +390,29 @@ int main(int argc, char** argv) {
     for (int i = 1; i < argc; ++i) {
         if (std::strcmp(argv[i], "--quick") == 0) {
             quick = true;
+        } else if (std::strcmp(argv[i], "--echo-server") == 0) {
+            return run_echo_server();
         } else {
             std::fprintf(stderr, "usage: %s [--quick]\n", argv[0]);
             return 2;
         }
     }
     Daemon daemon;
-    std::printf("proximad at %s; %u hardware threads\n\n", daemon.address.c_str(),
-                std::thread::hardware_concurrency());
+    Daemon echo("/proc/self/exe");
+    std::printf("proximad at %s, echo server at %s; %u hardware threads\n\n",
+                daemon.address.c_str(), echo.address.c_str(), std::thread::hardware_concurrency());
     std::printf(
-        "Round trip per frame, positions only, lockstep (ms; overhead = round trip - "
-        "server time)\n\n");
+        "Round trip per frame, positions only, lockstep (ms; overhead = round trip - server "
+        "time; echo and ack: the same serialized frame over a bare gRPC stream, answered with "
+        "the same bytes or with an empty message, interleaved with the daemon's frames)\n\n");
     std::printf(
-        "| vertices | buffer | round trip p50 | server p50 | overhead p50 | overhead p99 |\n");
-    std::printf("|---|---|---|---|---|---|\n");
+        "| vertices | buffer | frame bytes | round trip p50 | server p50 | overhead p50 | "
+        "overhead p99 | echo p50 | ack p50 | overhead / echo | overhead / ack |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
     const int frames = quick ? 8 : 200;
     for (bool f32 : {true, false}) {
-        overhead(daemon.address, 150, 100, f32, frames);          // 15,000 vertices
-        overhead(daemon.address, 500, 300, f32, quick ? 5 : 60);  // 150,000 vertices
+        overhead(daemon.address, echo.address, 150, 100, f32, frames);          // 15,000
+        overhead(daemon.address, echo.address, 500, 300, f32, quick ? 5 : 60);  // 150,000
     }
     std::printf(
         "\nConcurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "

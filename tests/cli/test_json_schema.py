@@ -297,6 +297,15 @@ class JsonOutput(unittest.TestCase):
                             "--model", "plant", "--tolerance", "0.05", "--quiet")
         self.assertEqual(local["pairs"], remote["pairs"])
 
+    def test_region(self):
+        whole = self.check("region", "region", "--json", "--server", self.daemon.address,
+                           "--model", "plant", "--quiet")
+        self.assertEqual(whole["piece_count"], len(whole["pieces"]))
+        near = self.check("region", "region", "--json", "--server", self.daemon.address,
+                          "--model", "plant", "--center", "1,2,0.5", "--radius", "3",
+                          "--max-triangles", "5000", "--quiet")
+        self.assertLessEqual(near["triangle_count"], 5000)
+
     def test_review(self):
         local = self.check("review", "review", "--json", "--store", self.store, "--avatar",
                            self.avatar, "--path", self.path, "--tolerance", "0.5", "--quiet")

@@ -125,7 +125,8 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(doc["servers"], [self.address])
         self.assertEqual(doc["endReason"], "timeout")
         self.assertRegex(doc["date"], r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ$")
-        self.assertEqual(doc["clients"], {"sim": 2, "frames": 0, "review": 2, "verify": 1})
+        self.assertEqual(doc["clients"],
+                         {"sim": 2, "frames": 0, "review": 2, "verify": 1, "play": 0})
         self.assertEqual(doc["models"], ["plant"])
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
         for name, k in doc["kinds"].items():
@@ -140,6 +141,14 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(sum(s["kinds"].get("review_join", 0) for s in doc["timeline"]), 2)
         self.assertEqual(sum(s["count"] for s in doc["timeline"]),
                          doc["count"] + doc["warmup_count"])
+        # The harness's own share of the machine over the measured part: five client threads
+        # and the sampler, some CPU, less than every core of the machine at once.
+        h = doc["harness"]
+        self.assertEqual(h["threads"], 6)
+        self.assertGreater(h["cpu_seconds"], 0)
+        self.assertGreater(h["cpu_cores"], 0)
+        self.assertLess(h["cpu_cores"], os.cpu_count() + 0.5)
+        self.assertGreater(h["rss_bytes_max"], 1 << 20)
 
     def test_metrics_samples(self):
         doc = self.report()
@@ -211,6 +220,7 @@ class LoadCli(unittest.TestCase):
             (["--scene", "moon"], "unknown scene 'moon'"),
             (["--metrics", "10.1.2.3:9464"], "loopback"),
             (["--clients", "frames=1"], "frames clients need --frames DIR"),
+            (["--clients", "play=1"], "play clients need --sequence DIR"),
         ]
         for extra, message in cases:
             p = run(PROXIMA, "load", "--server", self.address, *extra)
@@ -232,6 +242,29 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(set(doc["kinds"]), {"pair_scene", "pair_frame"})
         self.assertEqual(doc["kinds"]["pair_scene"]["count"], 1)
         self.check_ghz("pair_frame", doc["kinds"]["pair_frame"])
+
+    def test_recorded_sequence(self):
+        # play clients: `proxima play`'s player on a generated sequence whose balls break into
+        # pieces halfway (a topology change mid-stream), over and over; the player checks every
+        # answer against the frame's objects, so an answer that missed the change is an error.
+        with tempfile.TemporaryDirectory() as tmp:
+            seq = os.path.join(tmp, "breaking")
+            p = run(PROXIMA, "generate", "sequence", "--scene", "breaking", "--frames", "8",
+                    "--dir", seq, "--quiet", "--out", os.path.join(tmp, "gen.json"))
+            self.assertEqual(p.returncode, 0, p.stderr)
+            p = run(PROXIMA, "load", "--server", self.address, "--duration", "4s", "--warmup",
+                    "0", "--clients", "play=1", "--sequence", seq, "--queries",
+                    "separation,collisions", "--json", "--quiet", timeout=60)
+            self.assertEqual(p.returncode, 0, p.stderr)
+            doc = json.loads(p.stdout)
+            self.assertEqual(doc["sequences"], [seq])
+            self.assertEqual(doc["clients"]["play"], 1)
+            self.assertEqual(set(doc["kinds"]), {"play_scene", "play_frame"})
+            self.assertGreaterEqual(doc["kinds"]["play_scene"]["count"], 1)
+            self.assertEqual(doc["statusCodeDistribution"], {"OK": doc["count"]})
+            # Frame 0 creates the scene; the others, the break at frame 4 among them, are frames.
+            self.assertGreaterEqual(doc["kinds"]["play_frame"]["count"], 7)
+            self.check_ghz("play_frame", doc["kinds"]["play_frame"])
 
     def test_failed_preconditions(self):
         # A daemon that does not answer, and a model that is not served: exit 1 before any load.

@@ -226,6 +226,35 @@ class MassiveCli(unittest.TestCase):
             p = run(PROXIMA, "verify", "--server", address, "--model", "nope", "--tolerance", "0")
             self.assertEqual(p.returncode, 1)
             self.assertIn("NOT_FOUND", p.stderr)
+            # proxima region: the whole model into an OBJ (every stored triangle once), then
+            # the pieces near box 0, nearest first.
+            obj = os.path.join(self.tmp, "region.obj")
+            whole = self.json_of("region", "--server", address, "--model", "row", "--float64",
+                                 "--obj", obj, "--quiet")
+            self.assertEqual(whole["piece_count"], self.summary["piece_count"])
+            self.assertEqual(whole["triangle_count"], self.summary["triangle_count"])
+            self.assertFalse(whole["truncated"])
+            with open(obj) as f:
+                lines = f.read().splitlines()
+            faces = [line for line in lines if line.startswith("f ")]
+            vertices = [line for line in lines if line.startswith("v ")]
+            self.assertEqual(len(faces), whole["triangle_count"])
+            self.assertEqual(len(vertices), sum(p["vertex_count"] for p in whole["pieces"]))
+            self.assertEqual(sum(line.startswith("o ") for line in lines), whole["piece_count"])
+            top = max(int(i) for line in faces for i in line.split()[1:])
+            self.assertEqual(top, len(vertices))
+            ids = [line.split()[2:] for line in lines if line.startswith("# triangle_ids")]
+            self.assertEqual(sum(len(i) for i in ids), whole["triangle_count"])
+            near = self.json_of("region", "--server", address, "--model", "row", "--center",
+                                "0.5,0.5,0.5", "--radius", "1.2", "--quiet")
+            distances = [p["distance"] for p in near["pieces"]]
+            self.assertEqual(distances, sorted(distances))
+            self.assertTrue(0 < len(distances) < whole["piece_count"])
+            self.assertTrue(all(d <= 1.2 for d in distances))
+            self.assertEqual(near["pieces"][0]["name"].split("/")[-1], "box-0.off")
+            p = run(PROXIMA, "region", "--server", address, "--model", "row", "--objects", "99")
+            self.assertEqual(p.returncode, 1)
+            self.assertIn("INVALID_ARGUMENT", p.stderr)
         finally:
             self.assertEqual(daemon.stop(), 0, daemon.log())
             daemon.close()

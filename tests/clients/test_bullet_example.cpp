@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 #include <utility>
 #include <vector>
@@ -407,6 +408,55 @@ TEST(BulletExample, PushOutOnlyFollowsPenetrationsWithACorrectionFrame) {
     EXPECT_EQ(summary["pushout_count"], pushed_steps);
 }
 
+// --snapshots: PNGs of the daemon's scene through its Snapshot call, at step 0, every
+// --snapshot-every steps and the last, named in the JSON log, of the asked size, one camera for
+// all (so the first and last images differ only because the cloth moved).
+TEST(BulletExample, SnapshotsAreSavedThroughTheDaemonsSnapshotCall) {
+    test::DaemonProcess daemon({"--log-level", "warn"});
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    TempDir dir;
+    ASSERT_FALSE(dir.path.empty());
+    const auto log_file = dir.path / "log.json";
+    const auto shots = dir.path / "shots";
+    const std::string command = std::string(PROXIMA_BULLET_PATH) + " --server " + daemon.address() +
+                                " --scene cloth-sphere --steps 25 --resolution 12 --quiet" +
+                                " --snapshots " + shots.string() +
+                                " --snapshot-every 10 --snapshot-width 160 --snapshot-height 120" +
+                                " --json " + log_file.string();
+    ASSERT_EQ(run(command), 0) << command;
+    const json log = load(log_file);
+    EXPECT_EQ(log["summary"]["snapshots"]["count"], 4);
+    std::vector<std::string> named;
+    for (const auto& s : log["steps"]) {
+        if (s.contains("snapshot")) {
+            named.push_back(std::filesystem::path(s["snapshot"].get<std::string>()).filename());
+        }
+    }
+    EXPECT_EQ(named, (std::vector<std::string>{"cloth-sphere-000010.png", "cloth-sphere-000020.png",
+                                               "cloth-sphere-000025.png"}));
+    std::vector<std::string> bytes;
+    for (const char* name : {"cloth-sphere-000000.png", "cloth-sphere-000010.png",
+                             "cloth-sphere-000020.png", "cloth-sphere-000025.png"}) {
+        std::ifstream in(shots / name, std::ios::binary);
+        ASSERT_TRUE(in) << name;
+        std::string png((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        // The PNG signature, then IHDR: big-endian width and height at bytes 16 and 20.
+        ASSERT_GT(png.size(), 24u) << name;
+        EXPECT_EQ(png.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8)) << name;
+        auto be32 = [&](std::size_t at) {
+            std::uint32_t v = 0;
+            for (std::size_t i = 0; i < 4; ++i) {
+                v = (v << 8U) | static_cast<unsigned char>(png[at + i]);
+            }
+            return v;
+        };
+        EXPECT_EQ(be32(16), 160u) << name;
+        EXPECT_EQ(be32(20), 120u) << name;
+        bytes.push_back(std::move(png));
+    }
+    EXPECT_NE(bytes.front(), bytes.back());
+}
+
 // Standard error and exit status of a command line (standard output dropped).
 std::pair<int, std::string> run_capturing_stderr(const std::string& command) {
     std::string err;
@@ -426,7 +476,8 @@ TEST(BulletExample, UsageErrorsExitTwoWithOneLineAndTheHelpHint) {
     const std::string bin = PROXIMA_BULLET_PATH;
     for (const std::string args : {" --server 127.0.0.1:1 --scene teapot",
                                    " --scene cloth-sphere",  // --server is required
-                                   " --server 127.0.0.1:1 --steps 0"}) {
+                                   " --server 127.0.0.1:1 --steps 0",
+                                   " --server 127.0.0.1:1 --snapshots d --snapshot-every 0"}) {
         const auto [code, err] = run_capturing_stderr(bin + args);
         EXPECT_EQ(code, 2) << args;
         EXPECT_EQ(err.rfind("proxima-bullet: error: ", 0), 0u) << err;

@@ -533,6 +533,8 @@ test('errors: NOT_FOUND, INVALID_ARGUMENT', async () => {
   assert.deepEqual([models.models.length, models.models_dir], [0, '']);
   const verify = openStream(c.proximity.VerifyModel({ model: 'nope', tolerance: 0 }));
   await expectCode(verify.next(), status.NOT_FOUND);
+  const region = openStream(c.proximity.FetchRegion({ model: 'nope', center: { x: 0, y: 0, z: 0 }, radius: 1 }));
+  await expectCode(region.next(), status.NOT_FOUND);
 });
 
 test('deadline: a long query ends with DEADLINE_EXCEEDED and the daemon goes on', async () => {

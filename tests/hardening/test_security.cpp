@@ -255,6 +255,29 @@ TEST(Tokens, RoomsAndModelsNeedTheirAccess) {
     EXPECT_EQ(join(ALICE, "design-1", "other").error_code(), grpc::StatusCode::NOT_FOUND);
     const auto ok = join(ALICE, "design-1", "plant-a");
     EXPECT_TRUE(ok.ok()) << ok.error_message();
+
+    // FetchRegion: the model's access as VerifyModel, a room's as joining it.
+    auto region = [&](const std::string& token, const std::string& model, const std::string& room) {
+        auto context = context_for(token, 60s);
+        v1::FetchRegionRequest request;
+        request.set_model(model);
+        request.set_room(room);
+        request.set_max_triangles(100);
+        auto reader = fx.stub->FetchRegion(context.get(), request);
+        v1::RegionEvent event;
+        int summaries = 0;
+        while (reader->Read(&event)) {
+            summaries += event.has_summary() ? 1 : 0;
+        }
+        auto status = reader->Finish();
+        EXPECT_TRUE(!status.ok() || summaries == 1);
+        return status;
+    };
+    EXPECT_TRUE(region(ALICE, "plant-a", "").ok());
+    EXPECT_EQ(region(ALICE, "other", "").error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(region(BOB, "plant-a", "").error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(region(ALICE, "plant-a", "ops-1").error_code(), grpc::StatusCode::PERMISSION_DENIED);
+    EXPECT_EQ(region("", "plant-a", "").error_code(), grpc::StatusCode::UNAUTHENTICATED);
 }
 
 class Tls : public ::testing::Test {

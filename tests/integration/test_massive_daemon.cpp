@@ -7,15 +7,18 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <string>
 #include <thread>
 #include <tuple>
+#include <variant>
 #include <vector>
 
 #include <unistd.h>
@@ -23,6 +26,7 @@
 #include "client/proxima_client.hpp"
 #include "daemon_process.hpp"
 #include "proxima/massive/avatar.hpp"
+#include "proxima/massive/region.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/massive/verify.hpp"
 #include "wire.hpp"
@@ -838,6 +842,426 @@ TEST_F(MassiveDaemon, RestartServesTheSameGenerationWithoutReimport) {
     EXPECT_EQ(v->stats.pairs_found, pairs);
     EXPECT_TRUE(v->stats.schedule_from_store);  // the plan persisted with the store
     EXPECT_EQ(open_local()->summary().generation, generation);
+}
+
+// --- FetchRegion ---------------------------------------------------------------------------
+
+struct FetchedRegion {
+    std::vector<client::RegionPiece> pieces;
+    std::vector<client::RegionProgress> progress;
+    client::RegionSummary summary;
+};
+
+StatusOr<FetchedRegion> fetch_all(Client& c, const client::RegionRequest& request) {
+    FetchedRegion out;
+    auto summary = c.fetch_region(request, [&](const client::RegionEvent& e) {
+        if (const auto* p = std::get_if<client::RegionPiece>(&e)) {
+            // Progress is coalesced: the latest one counts the pieces sent before it.
+            if (!out.progress.empty()) {
+                EXPECT_LE(out.progress.back().pieces_sent, out.pieces.size());
+            }
+            out.pieces.push_back(*p);
+        } else if (const auto* g = std::get_if<client::RegionProgress>(&e)) {
+            out.progress.push_back(*g);
+        }
+        return true;
+    });
+    if (!summary.ok()) {
+        return summary.status();
+    }
+    out.summary = summary.value();
+    return out;
+}
+
+// Each triangle of the fetched pieces by (object, triangle id in the object): its 3 corners.
+using RegionTriangles = std::map<std::pair<std::uint32_t, std::uint32_t>, std::array<Vec3, 3>>;
+
+RegionTriangles region_triangles(const std::vector<client::RegionPiece>& pieces) {
+    RegionTriangles out;
+    for (const auto& p : pieces) {
+        EXPECT_EQ(p.triangle_ids.size(), p.triangles.size());
+        for (std::size_t t = 0; t < p.triangles.size(); ++t) {
+            std::array<Vec3, 3> corners;
+            for (int k = 0; k < 3; ++k) {
+                corners[static_cast<std::size_t>(k)] = p.vertices.at(p.triangles[t][k]);
+            }
+            const bool fresh = out.emplace(std::pair{p.object, p.triangle_ids[t]}, corners).second;
+            EXPECT_TRUE(fresh) << "object " << p.object << " triangle " << p.triangle_ids[t]
+                               << " sent twice";
+        }
+    }
+    return out;
+}
+
+// The object's stored triangles (as read in-process), through `map`, as float32 when asked.
+void expect_object_triangles(const RegionTriangles& got, std::uint32_t object,
+                             const TriangleMesh& stored, const massive::Affine& map, bool float32) {
+    for (std::uint32_t t = 0; t < stored.triangles.size(); ++t) {
+        const auto it = got.find({object, t});
+        ASSERT_NE(it, got.end()) << "object " << object << " triangle " << t << " missing";
+        for (int k = 0; k < 3; ++k) {
+            Vec3 want = map.apply(stored.vertices[stored.triangles[t][k]]);
+            if (float32) {
+                want = {static_cast<float>(want.x), static_cast<float>(want.y),
+                        static_cast<float>(want.z)};
+            }
+            EXPECT_EQ(it->second[static_cast<std::size_t>(k)], want)
+                << "object " << object << " triangle " << t << " corner " << k;
+        }
+    }
+}
+
+TEST_F(MassiveDaemon, FetchRegionWholeModelEqualsTheStore) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    for (const bool float64 : {true, false}) {
+        SCOPED_TRACE(float64 ? "float64" : "float32");
+        client::RegionRequest request;
+        request.model = "plant";
+        request.center = {3, 3, 0};  // ignored with radius 0
+        request.float64 = float64;
+        auto region = fetch_all(*c, request);
+        ASSERT_TRUE(region.ok()) << region.status().to_string();
+        const auto& s = store->summary();
+        EXPECT_EQ(region->pieces.size(), s.pieces);
+        EXPECT_EQ(region->summary.pieces, s.pieces);
+        EXPECT_EQ(region->summary.triangles, s.triangles);
+        EXPECT_FALSE(region->summary.truncated);
+        EXPECT_EQ(region->summary.model_version, 0u);
+        EXPECT_EQ(region->summary.generation, s.generation);
+        ASSERT_FALSE(region->progress.empty());
+        EXPECT_EQ(region->progress.back().pieces_total, s.pieces);
+        EXPECT_EQ(region->progress.back().triangles_total, s.triangles);
+        // Radius 0: every distance 0, so the order is by object then piece.
+        for (std::size_t k = 0; k < region->pieces.size(); ++k) {
+            const auto& p = region->pieces[k];
+            EXPECT_EQ(p.distance, 0.0);
+            EXPECT_EQ(p.object_name, store->objects()[p.object].name);
+            if (k > 0) {
+                EXPECT_LE(region->pieces[k - 1].object, p.object);
+            }
+        }
+        // The union is the store's triangles exactly: every id once, every corner bit for bit.
+        const auto got = region_triangles(region->pieces);
+        EXPECT_EQ(got.size(), s.triangles);
+        for (std::uint32_t o = 0; o < store->objects().size(); ++o) {
+            auto stored = massive::read_object(*store, o);
+            ASSERT_TRUE(stored.ok()) << stored.status().to_string();
+            expect_object_triangles(got, o, stored.value(), massive::Affine{}, !float64);
+        }
+    }
+}
+
+TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    const auto& pieces = store->pieces();
+    for (const double radius : {0.75, 2.5, 4.0}) {
+        SCOPED_TRACE("radius " + std::to_string(radius));
+        client::RegionRequest request;
+        request.model = "plant";
+        request.center = {5.2, 5.5, 0.5};
+        request.radius = radius;
+        request.float64 = true;
+        auto region = fetch_all(*c, request);
+        ASSERT_TRUE(region.ok()) << region.status().to_string();
+        // The reference: every stored piece whose box is within the radius, by distance, object,
+        // piece.
+        std::vector<std::tuple<double, std::uint32_t, std::uint32_t>> want;
+        for (std::uint32_t p = 0; p < pieces.size(); ++p) {
+            const double d = massive::box_distance(pieces[p].box, request.center);
+            if (d <= radius) {
+                want.emplace_back(d, pieces[p].object, p);
+            }
+        }
+        std::sort(want.begin(), want.end());
+        ASSERT_GT(want.size(), 0u);
+        ASSERT_LT(want.size(), pieces.size());  // some pieces are outside
+        ASSERT_EQ(region->pieces.size(), want.size());
+        std::uint64_t triangles = 0;
+        for (std::size_t k = 0; k < want.size(); ++k) {
+            const auto& [d, object, p] = want[k];
+            const auto& got = region->pieces[k];
+            EXPECT_EQ(got.object, object);
+            EXPECT_EQ(got.distance, d);
+            EXPECT_EQ(got.box.lo, pieces[p].box.lo);
+            EXPECT_EQ(got.box.hi, pieces[p].box.hi);
+            // The piece itself: the store's geometry with its object triangle ids.
+            auto local = store->read_piece(p);
+            ASSERT_TRUE(local.ok());
+            EXPECT_EQ(got.triangle_ids, local->source_triangles);
+            EXPECT_EQ(got.vertices, local->vertices);
+            EXPECT_EQ(got.triangles, local->triangles);
+            triangles += got.triangles.size();
+        }
+        EXPECT_EQ(region->summary.pieces, want.size());
+        EXPECT_EQ(region->summary.triangles, triangles);
+        EXPECT_FALSE(region->summary.truncated);
+    }
+
+    // Only some objects: the pipe (crossing row 2) and one cylinder, whole.
+    const auto pipe = static_cast<std::uint32_t>(store->objects().size() - 1);
+    client::RegionRequest only;
+    only.model = "plant";
+    only.objects = {pipe, 7};
+    auto region = fetch_all(*c, only);
+    ASSERT_TRUE(region.ok()) << region.status().to_string();
+    EXPECT_EQ(region->summary.triangles,
+              store->objects()[pipe].triangle_count + store->objects()[7].triangle_count);
+    for (const auto& p : region->pieces) {
+        EXPECT_TRUE(p.object == pipe || p.object == 7) << p.object;
+    }
+    EXPECT_EQ(region->pieces.front().object, 7u);  // ties by object
+
+    // max_triangles: the nearest pieces up to that many triangles, then truncated.
+    client::RegionRequest capped;
+    capped.model = "plant";
+    capped.center = {0.5, 0.5, 0.5};
+    capped.radius = 100.0;
+    auto all = fetch_all(*c, capped);
+    ASSERT_TRUE(all.ok()) << all.status().to_string();
+    ASSERT_EQ(all->pieces.size(), store->summary().pieces);
+    EXPECT_EQ(all->pieces.front().object, 0u);  // the centre is inside object 0
+    std::uint64_t first_three = 0;
+    for (std::size_t k = 0; k < 3; ++k) {
+        first_three += all->pieces[k].triangles.size();
+    }
+    capped.max_triangles = first_three + all->pieces[3].triangles.size() - 1;
+    auto cut = fetch_all(*c, capped);
+    ASSERT_TRUE(cut.ok()) << cut.status().to_string();
+    ASSERT_EQ(cut->pieces.size(), 3u);
+    EXPECT_TRUE(cut->summary.truncated);
+    EXPECT_EQ(cut->summary.triangles, first_three);
+    for (std::size_t k = 0; k < 3; ++k) {
+        EXPECT_EQ(cut->pieces[k].triangle_ids, all->pieces[k].triangle_ids);
+        EXPECT_EQ(cut->pieces[k].object, all->pieces[k].object);
+    }
+    capped.max_triangles = store->summary().triangles;
+    auto exact = fetch_all(*c, capped);
+    ASSERT_TRUE(exact.ok());
+    EXPECT_FALSE(exact->summary.truncated);
+    EXPECT_EQ(exact->summary.pieces, store->summary().pieces);
+}
+
+TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
+    write_store(*s_models / "other");
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    auto alice = c->join_review({"region-room", "plant", "alice", avatar, 0.0, true});
+    ASSERT_TRUE(alice.ok()) << alice.status().to_string();
+    auto& session = *alice.value();
+    auto edit = [&](std::uint64_t sequence) -> client::ReviewEditApplied {
+        for (int k = 0; k < 20; ++k) {
+            auto e = session.next(10s);
+            EXPECT_TRUE(e.ok()) << e.status().to_string();
+            if (!e.ok()) {
+                break;
+            }
+            if (e->kind == ReviewEvent::Kind::edit_applied && e->edit.sequence == sequence) {
+                return e->edit;
+            }
+        }
+        ADD_FAILURE() << "edit " << sequence << " never applied";
+        return {};
+    };
+    // Move cylinder 7 (split into pieces) far away, delete box 0, add a crate.
+    const auto moved_to = translation(30.0, -4.0, 2.0);
+    ASSERT_TRUE(session.move_object(1, 7, moved_to).ok());
+    const auto moved = edit(1);
+    EXPECT_EQ(moved.what, client::ReviewEditKind::move);
+    EXPECT_EQ(moved.transform.m, moved_to.m);  // EditApplied.transform
+    ASSERT_TRUE(session.delete_object(2, 0).ok());
+    EXPECT_EQ(edit(2).object, 0u);
+    const NamedMesh crate{"crate", box_mesh({24.9, 2.4, 0.4}, {25.6, 3.0, 1.0})};
+    ASSERT_TRUE(session.add_object(3, crate).ok());
+    const auto added = edit(3);
+    ASSERT_EQ(added.object, store->objects().size());
+    EXPECT_EQ(added.transform.m, massive::Affine{}.m);  // only moves carry one
+
+    client::RegionRequest request;
+    request.model = "plant";
+    request.room = "region-room";
+    request.float64 = true;
+    auto region = fetch_all(*c, request);
+    ASSERT_TRUE(region.ok()) << region.status().to_string();
+    EXPECT_EQ(region->summary.model_version, 3u);
+    const auto got = region_triangles(region->pieces);
+    std::uint64_t want_triangles = 0;
+    for (std::uint32_t o = 0; o < store->objects().size(); ++o) {
+        SCOPED_TRACE("object " + std::to_string(o));
+        auto stored = massive::read_object(*store, o);
+        ASSERT_TRUE(stored.ok());
+        if (o == 0) {
+            EXPECT_EQ(got.count({0u, 0u}), 0u);  // deleted
+            continue;
+        }
+        want_triangles += stored->triangles.size();
+        expect_object_triangles(got, o, stored.value(), o == 7 ? moved_to : massive::Affine{},
+                                false);
+    }
+    expect_object_triangles(got, added.object, crate.mesh, massive::Affine{}, false);
+    want_triangles += crate.mesh.triangles.size();
+    EXPECT_EQ(got.size(), want_triangles);
+    EXPECT_EQ(region->summary.triangles, want_triangles);
+    for (const auto& p : region->pieces) {
+        if (p.object == added.object) {
+            EXPECT_EQ(p.object_name, "crate");
+        }
+    }
+
+    // Just the added object, near where it is; and the moved one is found where it went.
+    request.objects = {added.object};
+    request.center = {25.0, 2.5, 0.5};
+    request.radius = 1.0;
+    auto just = fetch_all(*c, request);
+    ASSERT_TRUE(just.ok()) << just.status().to_string();
+    ASSERT_EQ(just->pieces.size(), 1u);
+    EXPECT_EQ(just->pieces[0].object, added.object);
+    EXPECT_EQ(just->pieces[0].distance, 0.0);
+    request.objects = {};
+    request.center = {31.5, -1.5, 2.5};  // inside the moved cylinder's box
+    request.radius = 0.1;
+    auto near_moved = fetch_all(*c, request);
+    ASSERT_TRUE(near_moved.ok()) << near_moved.status().to_string();
+    ASSERT_EQ(near_moved->pieces.size(), 1u);
+    EXPECT_EQ(near_moved->pieces[0].object, 7u);
+    // Without the room: the stored model, unedited.
+    request.room.clear();
+    auto stored_view = fetch_all(*c, request);
+    ASSERT_TRUE(stored_view.ok());
+    EXPECT_TRUE(stored_view->pieces.empty());
+    EXPECT_EQ(stored_view->summary.model_version, 0u);
+
+    // A room on another model, an unknown room, an object the room does not have.
+    request.model = "other";
+    request.room = "region-room";
+    auto wrong = fetch_all(*c, request);
+    EXPECT_EQ(wrong.status().code(), StatusCode::failed_precondition) << wrong.status().to_string();
+    request.model = "plant";
+    request.room = "no-such-room";
+    auto unknown = fetch_all(*c, request);
+    EXPECT_EQ(unknown.status().code(), StatusCode::not_found) << unknown.status().to_string();
+    request.room = "region-room";
+    request.objects = {added.object + 1};
+    auto beyond = fetch_all(*c, request);
+    EXPECT_EQ(beyond.status().code(), StatusCode::invalid_argument) << beyond.status().to_string();
+    session.cancel();
+    fs::remove_all(*s_models / "other");
+}
+
+TEST_F(MassiveDaemon, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double inf = std::numeric_limits<double>::infinity();
+    struct Case {
+        std::string what;
+        client::RegionRequest request;
+        StatusCode code;
+        std::string message;  // a part of the error message
+    };
+    auto make = [](auto change) {
+        client::RegionRequest r;
+        r.model = "plant";
+        r.radius = 1.0;
+        change(r);
+        return r;
+    };
+    const std::vector<Case> cases = {
+        {"unknown model", make([](auto& r) { r.model = "nope"; }), StatusCode::not_found, "nope"},
+        {"negative radius", make([](auto& r) { r.radius = -1.0; }), StatusCode::invalid_argument,
+         "radius"},
+        {"NaN radius", make([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
+         "radius"},
+        {"infinite radius", make([&](auto& r) { r.radius = inf; }), StatusCode::invalid_argument,
+         "radius"},
+        {"NaN center", make([&](auto& r) { r.center.y = nan; }), StatusCode::invalid_argument,
+         "center"},
+        {"infinite center", make([&](auto& r) { r.center.z = -inf; }), StatusCode::invalid_argument,
+         "center"},
+        {"object out of range", make([](auto& r) {
+             r.objects = {1, 999};
+         }),
+         StatusCode::invalid_argument, "objects[1]: object 999"},
+        {"unknown room", make([](auto& r) { r.room = "nobody-here"; }), StatusCode::not_found,
+         "nobody-here"},
+    };
+    for (const auto& k : cases) {
+        SCOPED_TRACE(k.what);
+        std::size_t events = 0;
+        auto got = c->fetch_region(k.request, [&](const client::RegionEvent&) {
+            ++events;
+            return true;
+        });
+        EXPECT_EQ(got.status().code(), k.code) << got.status().to_string();
+        EXPECT_NE(got.status().message().find(k.message), std::string::npos)
+            << got.status().to_string();
+        EXPECT_EQ(events, 0u);
+    }
+    // An unknown scalar type: the generated stub, since the library never sends one.
+    auto stub = make_stub(daemon.address());
+    grpc::ClientContext context;
+    deadline_in(context, 10s);
+    v1::FetchRegionRequest raw;
+    raw.set_model("plant");
+    raw.set_type(static_cast<v1::ScalarType>(7));
+    auto reader = stub->FetchRegion(&context, raw);
+    v1::RegionEvent event;
+    EXPECT_FALSE(reader->Read(&event));
+    const auto status = reader->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(status.error_message().find("type"), std::string::npos) << status.error_message();
+}
+
+TEST_F(MassiveDaemon, FetchRegionStopsOnCancelAndDeadline) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    client::RegionRequest request;
+    request.model = "plant";
+    std::size_t pieces = 0;
+    auto cancelled = c->fetch_region(request, [&](const client::RegionEvent& e) {
+        pieces += std::holds_alternative<client::RegionPiece>(e) ? 1 : 0;
+        return false;
+    });
+    EXPECT_EQ(cancelled.status().code(), StatusCode::cancelled) << cancelled.status().to_string();
+    EXPECT_EQ(pieces, 1u);
+    // A reader slower than its deadline: DEADLINE_EXCEEDED, not the whole model.
+    pieces = 0;
+    auto late = c->fetch_region(
+        request,
+        [&](const client::RegionEvent& e) {
+            if (std::holds_alternative<client::RegionPiece>(e)) {
+                ++pieces;
+                std::this_thread::sleep_for(50ms);
+            }
+            return true;
+        },
+        500ms);
+    EXPECT_EQ(late.status().code(), StatusCode::deadline_exceeded) << late.status().to_string();
+    auto store = open_local();
+    ASSERT_TRUE(store);
+    EXPECT_LT(pieces, store->summary().pieces);
+    // The daemon serves on.
+    auto again = c->fetch_region(request);
+    ASSERT_TRUE(again.ok()) << again.status().to_string();
+    EXPECT_EQ(again->pieces, store->summary().pieces);
 }
 
 }  // namespace

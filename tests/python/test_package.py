@@ -404,6 +404,35 @@ def test_models_and_verify(client: proxima.Client, models: Path) -> None:
     assert e.value.code is grpc.StatusCode.CANCELLED
 
 
+def test_fetch_region(client: proxima.Client) -> None:
+    row = client.list_models().models[0]
+    # The whole model: every stored triangle once, by (object, triangle id), ordered by object.
+    whole = client.fetch_region("row", float64=True).result()
+    assert whole.summary.pieces == row.pieces == len(whole.pieces)
+    assert whole.summary.triangles == row.triangles and not whole.summary.truncated
+    ids = [(obj, int(t)) for obj, mesh, tri_ids in whole.meshes() for t in tri_ids]
+    assert len(ids) == len(set(ids)) == row.triangles
+    assert [p.object for p in whole.pieces] == sorted(p.object for p in whole.pieces)
+    for obj, mesh, tri_ids in whole.meshes():
+        assert mesh.vertices.dtype == np.float64 and len(tri_ids) == len(mesh.triangles)
+    # Near a point: nearest first, every distance within the radius, float32 by default.
+    kinds = [e.WhichOneof("event") for e in client.fetch_region("row", (0.5, 0.5, 0.5), 1.5)]
+    assert kinds[0] == "piece" and kinds[-1] == "summary"
+    near = client.fetch_region("row", (0.5, 0.5, 0.5), 1.5).result()
+    distances = [p.distance for p in near.pieces]
+    assert distances == sorted(distances) and 0 < len(distances) < row.pieces
+    assert all(d <= 1.5 for d in distances) and distances[0] == 0.0
+    assert near.meshes()[0][1].vertices.dtype == np.float32
+    # Errors, before any event.
+    for kwargs, code in [({"model": "nope"}, grpc.StatusCode.NOT_FOUND),
+                         ({"model": "row", "radius": -1.0}, grpc.StatusCode.INVALID_ARGUMENT),
+                         ({"model": "row", "objects": [99]}, grpc.StatusCode.INVALID_ARGUMENT),
+                         ({"model": "row", "room": "none"}, grpc.StatusCode.NOT_FOUND)]:
+        with pytest.raises(proxima.ProximaError) as e:
+            list(client.fetch_region(**kwargs))
+        assert e.value.code is code, kwargs
+
+
 def test_review_room(client: proxima.Client) -> None:
     avatar = proxima.box("avatar", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))
     with client.review("room-1", "row", "ann", avatar, tolerance=0.2) as ann:

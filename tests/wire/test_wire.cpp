@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <tuple>
+#include <variant>
 
 #include "auth.hpp"
 #include "client/decode.hpp"
@@ -983,8 +984,12 @@ TEST(Wire, RoomEventsFromTheDaemonDecodeOnTheClient) {
     for (const auto kind :
          {massive::EditKind::move, massive::EditKind::add, massive::EditKind::remove}) {
         massive::EditEvent edit{"carol", 12, kind, 41, "valve", 9};
+        edit.transform.m[3] = 2.5;
+        edit.transform.m[11] = -0.1;
         message.Clear();
         wire::encode_room_event(edit, &message);
+        // Only a move carries its transform.
+        EXPECT_EQ(message.edit_applied().has_transform(), kind == massive::EditKind::move);
         event = detail::decode_review_event(reparse(message));
         ASSERT_TRUE(event.ok());
         EXPECT_EQ(event->kind, client::ReviewEvent::Kind::edit_applied);
@@ -994,6 +999,8 @@ TEST(Wire, RoomEventsFromTheDaemonDecodeOnTheClient) {
         EXPECT_EQ(event->edit.object, 41u);
         EXPECT_EQ(event->edit.object_name, "valve");
         EXPECT_EQ(event->edit.model_version, 9u);
+        EXPECT_EQ(event->edit.transform.m,
+                  kind == massive::EditKind::move ? edit.transform.m : massive::Affine{}.m);
     }
 
     // member_joined / member_left
@@ -1019,6 +1026,106 @@ TEST(Wire, RoomEventsFromTheDaemonDecodeOnTheClient) {
     message.mutable_edit_applied()->set_what(static_cast<v1::EditKind>(17));
     EXPECT_EQ(detail::decode_review_event(message).status().code(), StatusCode::internal);
     EXPECT_EQ(detail::decode_review_event(v1::ReviewEvent()).status().code(), StatusCode::internal);
+}
+
+TEST(Wire, RegionRequestsAndEventsRoundTrip) {
+    massive::RegionRequest request;
+    request.model = "plant";
+    request.center = {0.1, -2.0 / 3.0, 1e300};
+    request.radius = 0.7;
+    request.room = "design-1";
+    request.objects = {4, 0, 17};
+    request.max_triangles = 1000;
+    request.float64 = true;
+    v1::FetchRegionRequest message;
+    wire::encode_region_request(request, &message);
+    EXPECT_EQ(message.type(), v1::SCALAR_TYPE_FLOAT64);
+    auto decoded = wire::decode_region_request(reparse(message));
+    ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+    EXPECT_EQ(decoded->model, "plant");
+    EXPECT_EQ(decoded->center, request.center);
+    EXPECT_EQ(decoded->radius, 0.7);
+    EXPECT_EQ(decoded->room, "design-1");
+    EXPECT_EQ(decoded->objects, request.objects);
+    EXPECT_EQ(decoded->max_triangles, 1000u);
+    EXPECT_TRUE(decoded->float64);
+    // Unset type: float32; an unknown one is the caller's error, naming the field.
+    message.clear_type();
+    decoded = wire::decode_region_request(message);
+    ASSERT_TRUE(decoded.ok());
+    EXPECT_FALSE(decoded->float64);
+    message.set_type(static_cast<v1::ScalarType>(9));
+    expect_error(wire::decode_region_request(message).status(), StatusCode::invalid_argument,
+                 {"type", "9"});
+
+    // A piece, in float64 (exact) and float32 (each coordinate rounded).
+    const NamedMesh mesh = awkward_mesh();
+    massive::RegionPiece piece;
+    piece.object = 12;
+    piece.object_name = "valve";
+    piece.vertices = mesh.mesh.vertices;
+    piece.triangles = mesh.mesh.triangles;
+    for (std::size_t t = 0; t < piece.triangles.size(); ++t) {
+        piece.triangle_ids.push_back(static_cast<std::uint32_t>(100 + 3 * t));
+    }
+    piece.box = compute_box(piece.vertices);
+    piece.distance = 0.25;
+    for (const bool float32 : {false, true}) {
+        v1::RegionEvent event;
+        wire::encode_region_event(piece, float32, &event);
+        auto back = wire::decode_region_event(reparse(event));
+        ASSERT_TRUE(back.ok()) << back.status().to_string();
+        const auto* p = std::get_if<massive::RegionPiece>(&back.value());
+        ASSERT_NE(p, nullptr);
+        EXPECT_EQ(p->object, 12u);
+        EXPECT_EQ(p->object_name, "valve");
+        EXPECT_EQ(event.piece().mesh().name(), "valve");
+        EXPECT_EQ(p->triangles, piece.triangles);
+        EXPECT_EQ(p->triangle_ids, piece.triangle_ids);
+        EXPECT_EQ(p->box.lo, piece.box.lo);
+        EXPECT_EQ(p->box.hi, piece.box.hi);
+        EXPECT_EQ(p->distance, 0.25);
+        ASSERT_EQ(p->vertices.size(), piece.vertices.size());
+        for (std::size_t v = 0; v < piece.vertices.size(); ++v) {
+            for (int k = 0; k < 3; ++k) {
+                const double sent = piece.vertices[v][k];
+                const double want = float32 ? static_cast<float>(sent) : sent;
+                EXPECT_EQ(bits(p->vertices[v][k]), bits(want)) << "vertex " << v << " " << k;
+            }
+        }
+        // triangle_ids must be one per triangle.
+        event.mutable_piece()->mutable_triangle_ids()->RemoveLast();
+        expect_error(wire::decode_region_event(event).status(), StatusCode::internal,
+                     {"triangle_ids"});
+    }
+
+    v1::RegionEvent event;
+    wire::encode_region_event(massive::RegionProgress{3, 10, 300, 1000}, true, &event);
+    auto progress = wire::decode_region_event(reparse(event));
+    ASSERT_TRUE(progress.ok());
+    const auto* g = std::get_if<massive::RegionProgress>(&progress.value());
+    ASSERT_NE(g, nullptr);
+    EXPECT_EQ(g->pieces_sent, 3u);
+    EXPECT_EQ(g->pieces_total, 10u);
+    EXPECT_EQ(g->triangles_sent, 300u);
+    EXPECT_EQ(g->triangles_total, 1000u);
+
+    event.Clear();
+    wire::encode_region_event(massive::RegionSummary{10, 1000, true, 4, "gen-000002", 0.5}, true,
+                              &event);
+    auto summary = wire::decode_region_event(reparse(event));
+    ASSERT_TRUE(summary.ok());
+    const auto* s = std::get_if<massive::RegionSummary>(&summary.value());
+    ASSERT_NE(s, nullptr);
+    EXPECT_EQ(s->pieces, 10u);
+    EXPECT_EQ(s->triangles, 1000u);
+    EXPECT_TRUE(s->truncated);
+    EXPECT_EQ(s->model_version, 4u);
+    EXPECT_EQ(s->generation, "gen-000002");
+    EXPECT_EQ(s->server_seconds, 0.5);
+
+    expect_error(wire::decode_region_event(v1::RegionEvent()).status(), StatusCode::internal,
+                 {"empty"});
 }
 
 TEST(Wire, ModelListDecodes) {

@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <numbers>
@@ -90,6 +91,10 @@ struct Args {
     bool no_limit = false;
     bool pushout_only = false;
     bool quiet = false;
+    std::string snapshot_dir;         // --snapshots DIR: PNGs through the daemon's Snapshot call
+    std::size_t snapshot_every = 10;  // every this many steps (and step 0 and the last)
+    int snapshot_width = 640;
+    int snapshot_height = 480;
 };
 
 // --- The Bullet world ------------------------------------------------------------------------
@@ -605,6 +610,25 @@ class Session {
         return response;
     }
 
+    // An offscreen PNG of the daemon's scene as it is now (the last frame sent), coloured as the
+    // review page colours results: collisions red, near-contacts (within --near) amber, each
+    // object's closest pair as a segment. The first snapshot's fitted camera is kept for the
+    // others, so consecutive images share one view.
+    StatusOr<render::Snapshot> snapshot() {
+        render::SnapshotRequest request;
+        request.render.width = m_args.snapshot_width;
+        request.render.height = m_args.snapshot_height;
+        request.render.camera = m_snapshot_camera;
+        request.collisions = true;
+        request.tolerance = m_args.near;
+        request.segments = true;
+        auto shot = m_client->snapshot(m_scene_id, request);
+        if (shot.ok() && !m_snapshot_camera) {
+            m_snapshot_camera = shot->camera;
+        }
+        return shot;
+    }
+
     // The soft bodies' positions in the daemon's scene (the last frame sent).
     const std::vector<std::vector<Vec3>>& sent() const { return m_sent; }
 
@@ -624,6 +648,7 @@ class Session {
     std::vector<ObjectId> m_local_ids;
     std::uint64_t m_frame = 0;
     std::vector<std::vector<Vec3>> m_sent;
+    std::optional<render::Camera> m_snapshot_camera;
 };
 
 // --- The simulation loop ---------------------------------------------------------------------
@@ -710,6 +735,48 @@ int run(const Args& args) {
         std::fprintf(stderr, "proxima-bullet: error: %s (daemon at %s)\n",
                      client::describe_status(st).c_str(), args.server.c_str());
         return 1;
+    }
+
+    // --snapshots: step 0 first, so a daemon that cannot render (no EGL) fails the run before it
+    // simulates anything.
+    std::size_t snapshots_taken = 0;
+    double snapshot_ms = 0;
+    auto take_snapshot = [&](std::size_t step) -> StatusOr<std::string> {
+        if (args.snapshot_dir.empty()) {
+            return std::string{};
+        }
+        const auto start = std::chrono::steady_clock::now();
+        auto shot = session.snapshot();
+        if (!shot.ok()) {
+            return shot.status();
+        }
+        char name[64];
+        std::snprintf(name, sizeof name, "%s-%06zu.png", args.scene.c_str(), step);
+        const auto path = std::filesystem::path(args.snapshot_dir) / name;
+        std::ofstream out(path, std::ios::binary);
+        out.write(shot->png.data(), static_cast<std::streamsize>(shot->png.size()));
+        out.close();
+        if (!out) {
+            return Status(StatusCode::unavailable, "cannot write '" + path.string() + "'");
+        }
+        snapshot_ms += milliseconds_since(start);
+        ++snapshots_taken;
+        return path.string();
+    };
+    if (!args.snapshot_dir.empty()) {
+        std::error_code ec;
+        std::filesystem::create_directories(args.snapshot_dir, ec);
+        if (ec) {
+            std::fprintf(stderr, "proxima-bullet: error: cannot create '%s': %s\n",
+                         args.snapshot_dir.c_str(), ec.message().c_str());
+            return 1;
+        }
+        if (auto first = take_snapshot(0); !first.ok()) {
+            std::fprintf(stderr,
+                         "proxima-bullet: error: %s (the snapshot of step 0, daemon at %s)\n",
+                         client::describe_status(first.status()).c_str(), args.server.c_str());
+            return 1;
+        }
     }
 
     json record;
@@ -1053,6 +1120,15 @@ int run(const Args& args) {
                                      {"self_contacts_bullet_ignores", self_contacts},
                                      {"bullet_contacts_not_near", bullet_not_near},
                                      {"near_without_bullet_contact", near_no_bullet}};
+        if (!args.snapshot_dir.empty() && (step % args.snapshot_every == 0 || step == args.steps)) {
+            auto shot = take_snapshot(step);
+            if (!shot.ok()) {
+                std::fprintf(stderr, "proxima-bullet: error: %s (the snapshot of step %zu)\n",
+                             client::describe_status(shot.status()).c_str(), step);
+                return 1;
+            }
+            step_log["snapshot"] = shot.value();
+        }
         log_steps.push_back(std::move(step_log));
         totals.bullet_ms.values.push_back(bullet_ms);
         totals.round_trip_ms.values.push_back(round_trip_ms);
@@ -1090,6 +1166,10 @@ int run(const Args& args) {
         {"bullet_ms", totals.bullet_ms.to_json()},
         {"round_trip_ms", totals.round_trip_ms.to_json()},
         {"server_ms", totals.server_ms.to_json()}};
+    if (!args.snapshot_dir.empty()) {
+        summary["snapshots"] = {
+            {"directory", args.snapshot_dir}, {"count", snapshots_taken}, {"ms", snapshot_ms}};
+    }
     if (args.check) {
         summary["check"] = {
             {"frame_count", session.checked_frames},
@@ -1205,6 +1285,15 @@ int run_main(int argc, char** argv) {
                  "penetration vectors after the step")
         ->excludes("--no-limit");
     app.add_flag("--quiet", args.quiet, "no per-step lines");
+    app.add_option("--snapshots", args.snapshot_dir,
+                   "save PNG snapshots of the daemon's scene (its Snapshot call) into DIR: step 0, "
+                   "every --snapshot-every steps and the last, named SCENE-STEP.png");
+    app.add_option("--snapshot-every", args.snapshot_every, "steps between snapshots")
+        ->check(CLI::Range(1, 1000000));
+    app.add_option("--snapshot-width", args.snapshot_width, "snapshot width, pixels")
+        ->check(CLI::Range(1, render::MAX_SNAPSHOT_SIDE));
+    app.add_option("--snapshot-height", args.snapshot_height, "snapshot height, pixels")
+        ->check(CLI::Range(1, render::MAX_SNAPSHOT_SIDE));
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -19,8 +19,9 @@ except ImportError as _e:  # the source folder itself, which has no generated st
     raise ImportError(
         f"proxima: no generated stubs next to {__file__}: import the package from the build "
         "tree (PYTHONPATH=build/<preset>/python) or pip install ./clients/python") from _e
-from .client import (ROUTE_HEADER, UPLOAD_CHUNK_BYTES, Client, FrameStream, ResultStream, ReviewSession,
-                     VerifyResult, VerifyStream, read_token_file)
+from .client import (ROUTE_HEADER, UPLOAD_CHUNK_BYTES, Client, FrameStream, RegionResult,
+                     RegionStream, ResultStream, ReviewSession, VerifyResult, VerifyStream,
+                     read_token_file)
 from .errors import ProximaError
 from .frames import CULLERS, Result, culler_value, fragment_ids, make_frame
 from .geometry import (Mesh, as_triangles, as_vertices, box, decode_mesh, encode_mesh, grid,
@@ -30,7 +31,8 @@ from .geometry import (Mesh, as_triangles, as_vertices, box, decode_mesh, encode
 __version__ = "0.1.0"
 
 __all__ = [
-    "CULLERS", "Client", "ROUTE_HEADER", "FrameStream", "Mesh", "ProximaError", "Result", "ResultStream",
+    "CULLERS", "Client", "ROUTE_HEADER", "FrameStream", "Mesh", "ProximaError", "RegionResult",
+    "RegionStream", "Result", "ResultStream",
     "ReviewSession", "UPLOAD_CHUNK_BYTES", "VerifyResult", "VerifyStream", "as_triangles",
     "as_vertices", "box", "culler_value", "decode_mesh", "encode_mesh", "fragment_ids", "grid",
     "make_frame", "pack_triangles", "pack_vertices", "pb", "pb_grpc", "read_token_file",

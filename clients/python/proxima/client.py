@@ -16,7 +16,8 @@ from ._pb import proxima_pb2 as pb
 from ._pb import proxima_pb2_grpc as pb_grpc
 from .errors import ProximaError
 from .frames import Result, make_frame
-from .geometry import ArrayLike, Mesh, encode_mesh, pack_triangles, pack_vertices, transform
+from .geometry import (ArrayLike, Mesh, decode_mesh, encode_mesh, pack_triangles, pack_vertices,
+                       transform)
 
 UPLOAD_CHUNK_BYTES = 1 << 20
 T = TypeVar("T")
@@ -222,6 +223,40 @@ class VerifyResult:
         return np.array([((p.point_a.x, p.point_a.y, p.point_a.z),
                           (p.point_b.x, p.point_b.y, p.point_b.z)) for p in self.pairs],
                         dtype=np.float64).reshape(-1, 2, 3)
+
+
+class RegionStream(_ServerStream[Any]):
+    """The RegionEvents of Client.fetch_region() (each with one of `piece`, `progress`,
+    `summary`: `event.WhichOneof("event")`), nearest piece first; cancel() stops the fetch."""
+
+    def result(self, on_progress: Optional[Callable[[Any], None]] = None) -> "RegionResult":
+        """Reads the whole stream: the pieces (RegionPiece messages, in the order sent) and the
+        summary (RegionSummary). `on_progress` is called with each RegionProgress."""
+        out = RegionResult()
+        for event in self:
+            kind = event.WhichOneof("event")
+            if kind == "piece":
+                out.pieces.append(event.piece)
+            elif kind == "summary":
+                out.summary = event.summary
+            elif kind == "progress" and on_progress is not None:
+                on_progress(event.progress)
+        return out
+
+
+@dataclass
+class RegionResult:
+    """A finished region fetch: `pieces` (RegionPiece messages, nearest first) and `summary`
+    (RegionSummary)."""
+
+    pieces: List[Any] = field(default_factory=list)
+    summary: Any = None
+
+    def meshes(self) -> List[Tuple[int, Mesh, np.ndarray]]:
+        """Each piece as (object, Mesh in model coordinates, triangle_ids: (T,) uint32, each
+        triangle's id in its whole object)."""
+        return [(p.object, decode_mesh(p.mesh), np.array(p.triangle_ids, dtype=np.uint32))
+                for p in self.pieces]
 
 
 class ReviewSession:
@@ -599,6 +634,23 @@ class Client:
         """Every object pair of `model` within `tolerance` (0: touching or intersecting): the
         VerifyResult (pairs sorted by object pair, the summary)."""
         return self.verify_model(model, tolerance, timeout).result(on_progress)
+
+    def fetch_region(self, model: str, center: ArrayLike = (0.0, 0.0, 0.0), radius: float = 0.0,
+                     room: str = "", objects: Sequence[int] = (), max_triangles: int = 0,
+                     float64: bool = False, timeout: Optional[float] = None) -> RegionStream:
+        """FetchRegion: the pieces of `model` whose boxes come within `radius` of `center`
+        (radius 0: every piece), nearest first, then the summary; with `room`, that review
+        room's edited view. Iterate the stream, or take .result(); cancel() stops it."""
+        c = np.asarray(center, dtype=np.float64).reshape(3)
+        request = pb.FetchRegionRequest(
+            model=model, center=pb.Vec3(x=float(c[0]), y=float(c[1]), z=float(c[2])),
+            radius=radius, room=room, objects=list(objects), max_triangles=max_triangles,
+            type=pb.SCALAR_TYPE_FLOAT64 if float64 else pb.SCALAR_TYPE_FLOAT32)
+        # A room's view lives on the daemon its members meet on: the room's name is the route.
+        metadata = (self._metadata if self._explicit_route or not room
+                    else self._auth + ((ROUTE_HEADER, room),))
+        return RegionStream(self.stub.FetchRegion(request, metadata=metadata, timeout=timeout),
+                            lambda e: e)
 
     def review(self, room: str, model: str, member: str, avatar: Mesh, tolerance: float = 0.0,
                nearest: bool = True, timeout: Optional[float] = 60.0) -> ReviewSession:

@@ -383,33 +383,14 @@ class EglDvdBackend final : public dvd::Backend {
 
     Status compile_kernel() {
         const GlApi& gl = m_context->gl();
-        const std::string source = dvd_shader_source();
-        const GLchar* text = source.c_str();
-        const GLuint shader = gl.glCreateShader(GL_COMPUTE_SHADER);
-        gl.glShaderSource(shader, 1, &text, nullptr);
-        gl.glCompileShader(shader);
-        GLint ok = GL_FALSE;
-        gl.glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-        if (ok != GL_TRUE) {
-            std::string log(4096, '\0');
-            GLsizei length = 0;
-            gl.glGetShaderInfoLog(shader, static_cast<GLsizei>(log.size()), &length, log.data());
-            log.resize(static_cast<std::size_t>(std::max(length, 0)));
-            gl.glDeleteShader(shader);
+        std::string log;
+        const GLuint shader = compile_shader(gl, GL_COMPUTE_SHADER, dvd_shader_source(), log);
+        if (shader == 0) {
             return unavailable("OpenGL: the kernel's compute shader did not compile on " +
                                m_context->renderer() + ": " + log);
         }
-        m_program = gl.glCreateProgram();
-        gl.glAttachShader(m_program, shader);
-        gl.glLinkProgram(m_program);
-        gl.glDeleteShader(shader);  // flagged; freed with the program
-        gl.glGetProgramiv(m_program, GL_LINK_STATUS, &ok);
-        if (ok != GL_TRUE) {
-            std::string log(4096, '\0');
-            GLsizei length = 0;
-            gl.glGetProgramInfoLog(m_program, static_cast<GLsizei>(log.size()), &length,
-                                   log.data());
-            log.resize(static_cast<std::size_t>(std::max(length, 0)));
+        m_program = link_program(gl, {shader}, log);
+        if (m_program == 0) {
             return unavailable("OpenGL: the kernel's program did not link on " +
                                m_context->renderer() + ": " + log);
         }

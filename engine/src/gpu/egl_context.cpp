@@ -4,6 +4,7 @@
 #include <EGL/eglext.h>
 #include <dlfcn.h>
 #include <link.h>
+#include <algorithm>
 
 #include <cstdlib>
 #include <cstring>
@@ -376,6 +377,46 @@ Status load_gl_api(GlApi& api) {
     PROXIMA_GL_FUNCTIONS(PROXIMA_GL_LOAD)
 #undef PROXIMA_GL_LOAD
     return Status::ok_status();
+}
+
+GLuint compile_shader(const GlApi& gl, GLenum kind, const std::string& source, std::string& log) {
+    const GLuint shader = gl.glCreateShader(kind);
+    const GLchar* text = source.c_str();
+    gl.glShaderSource(shader, 1, &text, nullptr);
+    gl.glCompileShader(shader);
+    GLint ok = GL_FALSE;
+    gl.glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+    if (ok == GL_TRUE) {
+        return shader;
+    }
+    log.assign(4096, '\0');
+    GLsizei length = 0;
+    gl.glGetShaderInfoLog(shader, static_cast<GLsizei>(log.size()), &length, log.data());
+    log.resize(static_cast<std::size_t>(std::max(length, 0)));
+    gl.glDeleteShader(shader);
+    return 0;
+}
+
+GLuint link_program(const GlApi& gl, std::initializer_list<GLuint> shaders, std::string& log) {
+    const GLuint program = gl.glCreateProgram();
+    for (const GLuint s : shaders) {
+        gl.glAttachShader(program, s);
+    }
+    gl.glLinkProgram(program);
+    for (const GLuint s : shaders) {
+        gl.glDeleteShader(s);
+    }
+    GLint ok = GL_FALSE;
+    gl.glGetProgramiv(program, GL_LINK_STATUS, &ok);
+    if (ok == GL_TRUE) {
+        return program;
+    }
+    log.assign(4096, '\0');
+    GLsizei length = 0;
+    gl.glGetProgramInfoLog(program, static_cast<GLsizei>(log.size()), &length, log.data());
+    log.resize(static_cast<std::size_t>(std::max(length, 0)));
+    gl.glDeleteProgram(program);
+    return 0;
 }
 
 std::string gl_error_name(GLenum error) {

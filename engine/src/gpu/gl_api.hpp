@@ -7,6 +7,7 @@
 
 #include <GL/glcorearb.h>
 
+#include <initializer_list>
 #include <string>
 
 #include "proxima/status.hpp"
@@ -56,6 +57,14 @@ struct GlApi {
 // Loads every entry point; `unavailable` naming the first one missing. Needs a current context
 // on some drivers, so it is called after eglMakeCurrent.
 Status load_gl_api(GlApi& api);
+
+// Compiles one shader of `kind` from `source`: its name, or 0 with the driver's info log in `log`
+// (the failed shader deleted).
+GLuint compile_shader(const GlApi& gl, GLenum kind, const std::string& source, std::string& log);
+
+// Links the shaders into a new program and deletes them (flagged: freed with the program): its
+// name, or 0 with the driver's info log in `log` (the program deleted).
+GLuint link_program(const GlApi& gl, std::initializer_list<GLuint> shaders, std::string& log);
 
 // "GL_OUT_OF_MEMORY", "GL_GUILTY_CONTEXT_RESET" etc. (glGetError and glGetGraphicsResetStatus
 // values) for messages.

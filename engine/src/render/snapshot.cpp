@@ -198,48 +198,19 @@ struct GlObjects {
     }
 };
 
-StatusOr<GLuint> compile(const gpu::GlApi& gl, GLenum kind, const std::string& source) {
-    const GLuint shader = gl.glCreateShader(kind);
-    const GLchar* text = source.c_str();
-    gl.glShaderSource(shader, 1, &text, nullptr);
-    gl.glCompileShader(shader);
-    GLint ok = GL_FALSE;
-    gl.glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
-    if (ok != GL_TRUE) {
-        std::string log(4096, '\0');
-        GLsizei length = 0;
-        gl.glGetShaderInfoLog(shader, static_cast<GLsizei>(log.size()), &length, log.data());
-        log.resize(static_cast<std::size_t>(std::max(length, 0)));
-        gl.glDeleteShader(shader);
-        return Status(StatusCode::internal, "snapshot: shader did not compile: " + log);
-    }
-    return shader;
-}
-
 Status link_program(const gpu::GlApi& gl, GlObjects& objects) {
-    auto vs = compile(gl, GL_VERTEX_SHADER, VERTEX_SHADER);
-    if (!vs.ok()) {
-        return vs.status();
+    std::string log;
+    const GLuint vs = gpu::compile_shader(gl, GL_VERTEX_SHADER, VERTEX_SHADER, log);
+    if (vs == 0) {
+        return {StatusCode::internal, "snapshot: vertex shader did not compile: " + log};
     }
-    auto fs = compile(gl, GL_FRAGMENT_SHADER, FRAGMENT_SHADER);
-    if (!fs.ok()) {
-        gl.glDeleteShader(*vs);
-        return fs.status();
+    const GLuint fs = gpu::compile_shader(gl, GL_FRAGMENT_SHADER, FRAGMENT_SHADER, log);
+    if (fs == 0) {
+        gl.glDeleteShader(vs);
+        return {StatusCode::internal, "snapshot: fragment shader did not compile: " + log};
     }
-    objects.program = gl.glCreateProgram();
-    gl.glAttachShader(objects.program, *vs);
-    gl.glAttachShader(objects.program, *fs);
-    gl.glLinkProgram(objects.program);
-    gl.glDeleteShader(*vs);
-    gl.glDeleteShader(*fs);
-    GLint ok = GL_FALSE;
-    gl.glGetProgramiv(objects.program, GL_LINK_STATUS, &ok);
-    if (ok != GL_TRUE) {
-        std::string log(4096, '\0');
-        GLsizei length = 0;
-        gl.glGetProgramInfoLog(objects.program, static_cast<GLsizei>(log.size()), &length,
-                               log.data());
-        log.resize(static_cast<std::size_t>(std::max(length, 0)));
+    objects.program = gpu::link_program(gl, {vs, fs}, log);
+    if (objects.program == 0) {
         return {StatusCode::internal, "snapshot: program did not link: " + log};
     }
     return Status::ok_status();

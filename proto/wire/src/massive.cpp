@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <utility>
+#include <variant>
 
 #include "proxima/wire/buffers.hpp"
 
@@ -401,6 +402,9 @@ void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out) {
         a->set_object(e->object);
         a->set_object_name(e->object_name);
         a->set_model_version(e->model_version);
+        if (e->what == massive::EditKind::move) {
+            encode_transform(e->transform, a->mutable_transform());
+        }
     } else if (const auto* e = std::get_if<massive::MemberJoinedEvent>(&event)) {
         out->mutable_member_joined()->set_member(e->member);
     } else if (const auto* e = std::get_if<massive::MemberLeftEvent>(&event)) {
@@ -487,6 +491,13 @@ StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event) {
             out.object = e.object();
             out.object_name = e.object_name();
             out.model_version = e.model_version();
+            if (e.has_transform()) {
+                auto transform = decode_transform(e.transform(), "edit_applied.transform");
+                if (!transform.ok()) {
+                    return malformed_answer(transform.status().message());
+                }
+                out.transform = transform.value();
+            }
             return massive::RoomEvent(std::move(out));
         }
         case v1::ReviewEvent::kMemberJoined:
@@ -495,6 +506,140 @@ StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event) {
             return massive::RoomEvent(massive::MemberLeftEvent{event.member_left().member()});
         default:
             return malformed_answer("an empty review event");
+    }
+}
+
+// --- FetchRegion ---------------------------------------------------------------------------
+
+namespace {
+
+void encode_aabb(const Aabb& box, v1::Aabb* out) {
+    encode_vec3(box.lo, out->mutable_lo());
+    encode_vec3(box.hi, out->mutable_hi());
+}
+
+Aabb decode_aabb(const v1::Aabb& box) {
+    Aabb out;
+    out.lo = decode_vec3(box.lo());
+    out.hi = decode_vec3(box.hi());
+    return out;
+}
+
+}  // namespace
+
+void encode_region_request(const massive::RegionRequest& r, v1::FetchRegionRequest* out) {
+    out->set_model(r.model);
+    encode_vec3(r.center, out->mutable_center());
+    out->set_radius(r.radius);
+    out->set_room(r.room);
+    out->mutable_objects()->Reserve(static_cast<int>(r.objects.size()));
+    for (auto o : r.objects) {
+        out->add_objects(o);
+    }
+    out->set_max_triangles(r.max_triangles);
+    out->set_type(scalar_type(!r.float64));
+}
+
+StatusOr<massive::RegionRequest> decode_region_request(const v1::FetchRegionRequest& r) {
+    massive::RegionRequest out;
+    switch (r.type()) {
+        case v1::SCALAR_TYPE_UNSPECIFIED:
+        case v1::SCALAR_TYPE_FLOAT32:
+            out.float64 = false;
+            break;
+        case v1::SCALAR_TYPE_FLOAT64:
+            out.float64 = true;
+            break;
+        default:
+            return invalid_argument("type: unknown scalar type " +
+                                    std::to_string(static_cast<int>(r.type())) +
+                                    " (FLOAT32 or FLOAT64)");
+    }
+    out.model = r.model();
+    out.center = decode_vec3(r.center());
+    out.radius = r.radius();
+    out.room = r.room();
+    out.objects.assign(r.objects().begin(), r.objects().end());
+    out.max_triangles = r.max_triangles();
+    return out;
+}
+
+void encode_region_event(const massive::RegionEvent& event, bool float32, v1::RegionEvent* out) {
+    if (const auto* p = std::get_if<massive::RegionPiece>(&event)) {
+        auto* piece = out->mutable_piece();
+        piece->set_object(p->object);
+        piece->set_object_name(p->object_name);
+        auto* mesh = piece->mutable_mesh();
+        mesh->set_name(p->object_name);
+        mesh->mutable_vertices()->set_type(scalar_type(float32));
+        mesh->mutable_vertices()->set_data(pack_vertices(p->vertices, float32));
+        mesh->set_indices(pack_triangles(p->triangles));
+        piece->mutable_triangle_ids()->Add(p->triangle_ids.begin(), p->triangle_ids.end());
+        encode_aabb(p->box, piece->mutable_box());
+        piece->set_distance(p->distance);
+    } else if (const auto* g = std::get_if<massive::RegionProgress>(&event)) {
+        auto* progress = out->mutable_progress();
+        progress->set_pieces_sent(g->pieces_sent);
+        progress->set_pieces_total(g->pieces_total);
+        progress->set_triangles_sent(g->triangles_sent);
+        progress->set_triangles_total(g->triangles_total);
+    } else if (const auto* s = std::get_if<massive::RegionSummary>(&event)) {
+        auto* summary = out->mutable_summary();
+        summary->set_pieces(s->pieces);
+        summary->set_triangles(s->triangles);
+        summary->set_truncated(s->truncated);
+        summary->set_model_version(s->model_version);
+        summary->set_generation(s->generation);
+        summary->set_server_seconds(s->server_seconds);
+    }
+}
+
+StatusOr<massive::RegionEvent> decode_region_event(const v1::RegionEvent& event) {
+    switch (event.event_case()) {
+        case v1::RegionEvent::kPiece: {
+            const auto& p = event.piece();
+            massive::RegionPiece out;
+            out.object = p.object();
+            out.object_name = p.object_name();
+            auto vertices = decode_vertices(p.mesh().vertices(), "piece.mesh");
+            if (!vertices.ok()) {
+                return malformed_answer(vertices.status().message());
+            }
+            auto triangles = decode_indices(p.mesh().indices(), "piece.mesh");
+            if (!triangles.ok()) {
+                return malformed_answer(triangles.status().message());
+            }
+            out.vertices = std::move(vertices).value();
+            out.triangles = std::move(triangles).value();
+            if (static_cast<std::size_t>(p.triangle_ids_size()) != out.triangles.size()) {
+                return malformed_answer("piece of object " + std::to_string(p.object()) + ": " +
+                                        std::to_string(p.triangle_ids_size()) +
+                                        " triangle_ids for " +
+                                        std::to_string(out.triangles.size()) + " triangles");
+            }
+            out.triangle_ids.assign(p.triangle_ids().begin(), p.triangle_ids().end());
+            out.box = decode_aabb(p.box());
+            out.distance = p.distance();
+            return massive::RegionEvent(std::move(out));
+        }
+        case v1::RegionEvent::kProgress: {
+            const auto& g = event.progress();
+            return massive::RegionEvent(massive::RegionProgress{
+                g.pieces_sent(), g.pieces_total(), g.triangles_sent(), g.triangles_total()});
+        }
+        case v1::RegionEvent::kSummary: {
+            const auto& s = event.summary();
+            massive::RegionSummary out;
+            out.pieces = s.pieces();
+            out.triangles = s.triangles();
+            out.truncated = s.truncated();
+            out.model_version = s.model_version();
+            out.generation = s.generation();
+            out.server_seconds = s.server_seconds();
+            return massive::RegionEvent(std::move(out));
+        }
+        default:
+            return malformed_answer("an empty region event");
     }
 }
 

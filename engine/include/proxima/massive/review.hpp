@@ -95,6 +95,7 @@ struct EditEvent {
     std::uint32_t object = 0;  // moved / deleted object, or the added object's new index
     std::string object_name;
     std::uint64_t model_version = 0;
+    Affine transform;  // a move's new transform (of stored coordinates); identity otherwise
 };
 struct MemberJoinedEvent {
     std::string member;

@@ -1,9 +1,11 @@
 #pragma once
-// Massive models on the wire: transforms, cache counters, VerifyModel's events and the Review
-// stream (requests from the client, room events from the daemon), in both directions.
+// Massive models on the wire: transforms, cache counters, VerifyModel's events, the Review
+// stream (requests from the client, room events from the daemon) and FetchRegion, in both
+// directions.
 
 #include <string>
 
+#include "proxima/massive/region.hpp"
 #include "proxima/massive/review.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/massive/verify.hpp"
@@ -48,5 +50,17 @@ StatusOr<massive::ReviewRequest> decode_review_request(const v1::ReviewRequest& 
 void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out);
 // A malformed event (empty, an unknown edit kind, a bad transform) is an internal error.
 StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event);
+
+// --- FetchRegion ---
+
+void encode_region_request(const massive::RegionRequest& request, v1::FetchRegionRequest* out);
+// Checks what the message alone can get wrong (an unknown scalar type: invalid_argument naming
+// `type`); the daemon checks the rest against the model (massive::check_region_request).
+StatusOr<massive::RegionRequest> decode_region_request(const v1::FetchRegionRequest& request);
+
+// A piece's mesh is named after its object, its vertices float32 or float64.
+void encode_region_event(const massive::RegionEvent& event, bool float32, v1::RegionEvent* out);
+// A malformed event (empty, bad buffers, triangle_ids not one per triangle) is an internal error.
+StatusOr<massive::RegionEvent> decode_region_event(const v1::RegionEvent& event);
 
 }  // namespace proxima::wire
