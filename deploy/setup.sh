@@ -10,7 +10,8 @@
 # Node.js and npm (for tests/grpcjs, the daemon driven from Node's grpc-js) come from Debian's
 # `nodejs` and `npm` unless `node` / `npm` are already on PATH (a NodeSource `nodejs` brings its
 # own npm, and Debian's `npm` would conflict with it); then `npm ci` installs the pinned packages
-# of tests/grpcjs/package-lock.json into tests/grpcjs/node_modules.
+# of tests/grpcjs/package-lock.json into tests/grpcjs/node_modules (and likewise tests/k8s and
+# clients/web, whose page `vite build` then builds into clients/web/dist).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -36,6 +37,8 @@ packages=(
   gnuplot-nox
   # Scale-out (docs/deploy.md): several daemons behind HAProxy (tests/scaleout/test_haproxy.py).
   haproxy
+  # The review page's browser test (tests/web): Debian's chromium, driven by playwright-core.
+  chromium
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -78,22 +81,30 @@ install_packages() {
 
 npm_packages() {
   # `npm ci` from each lockfile (tests/grpcjs: the daemon from grpc-js; tests/k8s: the Kubernetes
-  # manifests' schema check), skipped while node_modules holds that lockfile's install.
+  # manifests' schema check; clients/web: the review page, its gateway and its browser test),
+  # skipped while node_modules holds that lockfile's install. playwright-core never downloads a
+  # browser: tests/web uses Debian's chromium.
   local name dir stamp want
-  for name in grpcjs k8s; do
-    dir="$here/tests/$name"
+  export PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1
+  for name in tests/grpcjs tests/k8s clients/web; do
+    dir="$here/$name"
     stamp="$dir/node_modules/.proxima-package-lock.sha256"
     want="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
     if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
-      log "tests/$name: node_modules matches package-lock.json"
+      log "$name: node_modules matches package-lock.json"
       continue
     fi
-    log "tests/$name: npm ci (node $(node --version), npm $(npm --version))"
+    log "$name: npm ci (node $(node --version), npm $(npm --version))"
     cd "$dir"
     run_quiet npm ci --no-audit --no-fund
     cd "$here"
     printf '%s\n' "$want" >"$stamp"
   done
+  # The review page, built by vite into clients/web/dist (what clients/web/gateway.js serves).
+  log "clients/web: vite build"
+  cd "$here/clients/web"
+  run_quiet npx --no-install vite build
+  cd "$here"
 }
 
 build() {
