@@ -5,7 +5,12 @@
 # interleaved (old first in odd rounds, new first in even ones), and prints per scene the medians
 # over the rounds: old ms, new warm ms, new cold ms, old/new ratios and the issue's goals.
 #
-#   tests/bench/baseline.sh [--commit C] [--rounds N] [--reps N] [--scenes a,b,...]
+#   tests/bench/baseline.sh [--commit C] [--rounds N] [--reps N] [--frames N] [--scenes a,b,...]
+#                           [--data DIR]
+#
+# Real frame pairs (--reps steps each) and the seed's procedural scenes bowl and breaking
+# (--frames frames, their per-frame self column) are compared; cloth-ball names both a real and a
+# procedural scene, only its real frames are reported.
 #
 # Run from the repository root after building this tree's proxima_bench
 # (cmake --build build/release --target proxima_bench). The old tree is built with the same
@@ -15,14 +20,18 @@ set -euo pipefail
 commit=d8a348f
 rounds=3
 reps=5
-scenes=n-body-simulation,cloth-ball,rod-twist,armadillo-rollers,cloth-funnel
+frames=4
+data=/work/shared/data
+scenes=n-body-simulation,cloth-ball,rod-twist,armadillo-rollers,cloth-funnel,bowl,breaking
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --commit) commit="$2"; shift 2 ;;
         --rounds) rounds="$2"; shift 2 ;;
         --reps) reps="$2"; shift 2 ;;
         --scenes) scenes="$2"; shift 2 ;;
-        -h|--help) sed -n 2,12p "$0"; exit 0 ;;
+        --frames) frames="$2"; shift 2 ;;
+        --data) data="$2"; shift 2 ;;
+        -h|--help) sed -n 2,17p "$0"; exit 0 ;;
         *) echo "unknown argument: $1" >&2; exit 2 ;;
     esac
 done
@@ -53,7 +62,8 @@ for ((r = 1; r <= rounds; ++r)); do
         bench=$old_bench
         [[ $which == new ]] && bench=$new_bench
         echo "round $r: $which (load $(cut -d' ' -f1 /proc/loadavg))" >&2
-        "$bench" --scenes "$scenes" --reps "$reps" --frames 2 >"$out/$which-$r.txt" 2>/dev/null
+        "$bench" --scenes "$scenes" --reps "$reps" --frames "$frames" --data "$data" \
+            >"$out/$which-$r.txt" 2>/dev/null
     done
 done
 echo "end: $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
@@ -63,7 +73,7 @@ import pathlib, statistics, sys
 
 out, rounds, commit = pathlib.Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 GOALS = {"cloth-ball": 100, "n-body": 25, "rod-twist": 30, "armadillo-rollers": 15,
-         "cloth-funnel": 10}
+         "cloth-funnel": 10, "bowl": 3.5, "breaking": 6}
 
 def self_table(path):
     """scene -> (self ms, exact tests, cold ms, cold exact tests, warm != cold, floor ms)"""
@@ -86,6 +96,23 @@ def self_table(path):
                               float(f[8]))
             else:  # scene triangles self exact goal met
                 rows[f[0]] = (float(f[2]), float(f[3]), None, None, 0, None)
+    # Seed scenes: the procedural table's per-frame self column (every frame is warm in the new
+    # engine; there is no cold column for them).
+    on, header = False, None
+    for line in path.read_text().splitlines():
+        if line.startswith("Procedural scenes: separation + self"):
+            on = True
+            continue
+        if on and header is None:
+            header = line.split()
+            continue
+        if on:
+            if not line.strip() or line.startswith(" "):
+                break
+            f = line.split()
+            if f[0] in ("bowl", "breaking"):
+                ms, exact = float(f[header.index("self")]), float(f[header.index("exact")])
+                rows[f[0]] = (ms, exact, None, None, 0, None)
     return rows
 
 old = [self_table(out / f"old-{r}.txt") for r in range(1, rounds + 1)]
@@ -102,15 +129,19 @@ for scene in old[0]:
     o = [t[scene][0] for t in old]
     w = [t[scene][0] for t in new]
     c = [t[scene][2] for t in new]
-    om, wm, cm = statistics.median(o), statistics.median(w), statistics.median(c)
+    om, wm = statistics.median(o), statistics.median(w)
+    cm = statistics.median(c) if None not in c else float("nan")
     per = ", ".join(f"{a / b:.2f}" for a, b in zip(o, w))
     goal = GOALS.get(scene)
     diff = sum(t[scene][4] for t in new)
-    fm = statistics.median(t[scene][5] for t in new)
+    fl = [t[scene][5] for t in new]
+    fm = statistics.median(fl) if None not in fl else float("nan")
+    ct = [t[scene][3] for t in new]
+    ctm = statistics.median(ct) if None not in ct else float("nan")
     print(f"| {scene} | {om:.1f} | {wm:.1f} | {cm:.1f} | {om / wm:.2f} | {om / cm:.2f} | {per} | "
           f"{statistics.median(t[scene][1] for t in old):,.0f} | "
           f"{statistics.median(t[scene][1] for t in new):,.0f} | "
-          f"{statistics.median(t[scene][3] for t in new):,.0f} | {fm:.1f} | {wm / fm:.1f} | {goal} | "
+          f"{ctm:,.0f} | {fm:.1f} | {wm / fm:.1f} | {goal} | "
           f"{'yes' if om / wm >= 4 else 'no'} | {'yes' if goal and wm <= goal else 'no'} | "
           f"{diff} |")
 EOF
