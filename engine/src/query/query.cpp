@@ -459,7 +459,13 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 const auto& hint = *hints[a];
                 for (std::uint32_t t = 0; t < nt; ++t) {
                     const std::uint32_t u = hint[t];
-                    if (u < nt && u != seed[t] && !topo.adjacent(t, u)) {
+                    if (u >= nt || u == seed[t] || topo.adjacent(t, u)) {
+                        continue;
+                    }
+                    // Within the 2-ring the nearest-centroid seed is as good a start; the
+                    // remembered triangle pays where it lies beyond (folds, contacts).
+                    const auto ring = topo.cached_two_ring(t);
+                    if (std::find(ring.begin(), ring.end(), u) == ring.end()) {
                         warm[t] = u;
                     }
                 }
