@@ -355,9 +355,10 @@ class SelfBests {
 // With the discrete-Voronoi culler, the kernel's partner of each triangle (Lemma 1: the
 // second-order governor of its best sample) replaces the 2-ring seed where it has one.
 // `hints[a]` (null or of another size: none) is object a's previous answer, closest triangle per
-// triangle: a warm frame seeds each triangle with it instead of the 2-ring (see ProximityEngine::
-// forget_coherence). A hint is only a candidate: it is checked (in range, not adjacent) and tested
-// exactly at the current positions, so it gives an upper bound whatever happened since.
+// triangle: a warm frame also seeds each triangle with it, beside the 2-ring seed, where it lies
+// outside the 2-ring (see ProximityEngine::forget_coherence). A hint is only a candidate: it is
+// checked (in range, not adjacent) and tested exactly at the current positions, so it gives an
+// upper bound whatever happened since.
 Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result,
                 const std::vector<const std::vector<std::uint32_t>*>& hints) {
     const std::size_t n = scene.size();
