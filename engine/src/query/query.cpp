@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <mutex>
+#include <unordered_map>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -353,7 +354,13 @@ class SelfBests {
 // non-adjacent pair.
 // With the discrete-Voronoi culler, the kernel's partner of each triangle (Lemma 1: the
 // second-order governor of its best sample) replaces the 2-ring seed where it has one.
-Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result) {
+// `hints[a]` (null or of another size: none) is object a's previous answer, closest triangle per
+// triangle: a warm frame also seeds each triangle with it, beside the 2-ring seed, where it lies
+// outside the 2-ring (see ProximityEngine::forget_coherence). A hint is only a candidate: it is
+// checked (in range, not adjacent) and tested exactly at the current positions, so it gives an
+// upper bound whatever happened since.
+Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result,
+                const std::vector<const std::vector<std::uint32_t>*>& hints) {
     const std::size_t n = scene.size();
     result.self.assign(n, {});
     for (std::size_t a = 0; a < n; ++a) {
@@ -441,21 +448,50 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                                       }
                                   }
                               });
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
-                              [&](const auto& range) {
-                                  if (work.should_stop()) {
-                                      return;
-                                  }
-                                  std::uint64_t count = 0;
-                                  for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                                      const std::uint32_t u = seed[t];
-                                      if (u == UINT32_MAX || (u < t && seed[u] == t)) {
-                                          continue;
-                                      }
-                                      test(t, u, corners(obj, t), count);
-                                  }
-                                  tests += count;
-                              });
+            // Warm frame: also the previous answer's triangle, where it is still a valid partner
+            // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
+            // the last positions, so under coherent motion it still is or nearly is: near-final
+            // bounds before any node threshold is computed. Both candidates are tested (after a
+            // large move the old answer can be far worse than the 2-ring's), so a warm bound is
+            // never looser than a cold one.
+            std::vector<std::uint32_t> warm;
+            if (a < hints.size() && hints[a] != nullptr && hints[a]->size() == nt) {
+                warm.assign(nt, UINT32_MAX);
+                const auto& hint = *hints[a];
+                for (std::uint32_t t = 0; t < nt; ++t) {
+                    const std::uint32_t u = hint[t];
+                    if (u >= nt || u == seed[t] || topo.adjacent(t, u)) {
+                        continue;
+                    }
+                    // Within the 2-ring the nearest-centroid seed is as good a start; the
+                    // remembered triangle pays where it lies beyond (folds, contacts).
+                    const auto ring = topo.cached_two_ring(t);
+                    if (std::find(ring.begin(), ring.end(), u) == ring.end()) {
+                        warm[t] = u;
+                    }
+                }
+            }
+            // A pair {t, u} (u < t) that u's own candidates name is tested from u's side only.
+            auto named_by = [&](std::uint32_t u, std::uint32_t t) {
+                return seed[u] == t || (!warm.empty() && warm[u] == t);
+            };
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto&
+                                                                                     range) {
+                if (work.should_stop()) {
+                    return;
+                }
+                std::uint64_t count = 0;
+                for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                    const Triangle x = corners(obj, t);
+                    for (const std::uint32_t u : {seed[t], warm.empty() ? UINT32_MAX : warm[t]}) {
+                        if (u == UINT32_MAX || (u < t && named_by(u, t))) {
+                            continue;
+                        }
+                        test(t, u, x, count);
+                    }
+                }
+                tests += count;
+            });
         }
         if (work.should_stop()) {
             return;
@@ -787,8 +823,31 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     }
     if (request.self) {
         t0 = Clock::now();
-        if (Status s = run_self(m_scene, culler, work, result); !s.ok()) {
+        std::vector<const std::vector<std::uint32_t>*> hints(m_scene.size(), nullptr);
+        for (std::size_t a = 0; a < m_scene.size(); ++a) {
+            const auto it = m_self_memory.find(m_scene[a].id);
+            if (it != m_self_memory.end() &&
+                it->second.topology_version == m_scene[a].topology_version) {
+                hints[a] = &it->second.closest;
+            }
+        }
+        if (Status s = run_self(m_scene, culler, work, result, hints); !s.ok()) {
             return s;
+        }
+        if (!work.stopped.load()) {
+            // Remember this answer for the next frame; objects no longer in the scene are dropped.
+            std::unordered_map<ObjectId, SelfMemory> memory;
+            memory.reserve(m_scene.size());
+            for (std::size_t a = 0; a < m_scene.size(); ++a) {
+                SelfMemory& m = memory[m_scene[a].id];
+                m.topology_version = m_scene[a].topology_version;
+                m.closest.resize(result.self[a].size());
+                for (std::size_t t = 0; t < m.closest.size(); ++t) {
+                    const auto c = result.self[a][t].closest;
+                    m.closest[t] = c == NO_OBJECT ? UINT32_MAX : static_cast<std::uint32_t>(c);
+                }
+            }
+            m_self_memory = std::move(memory);
         }
         stats.self_seconds = seconds_since(t0);
     }

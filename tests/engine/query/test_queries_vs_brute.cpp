@@ -418,5 +418,92 @@ TEST(QueriesVsBrute, ManyComponentsInOneObject) {
     }
 }
 
+// Frame-to-frame coherence (warm self queries seed each triangle with its previous closest
+// triangle): through one engine, every frame's self answer equals brute force and, bit for bit,
+// the same engine's cold answer (forget_coherence). The frames cover what can make a remembered
+// answer wrong or stale: small motion, a large move that scrambles every position (the previous
+// closest is now anywhere), a topology change (replacement), objects removed and added, a frame
+// without a self query (the memory is two frames old) and many components in one object.
+TEST(QueriesVsBrute, WarmSelfFramesEqualBruteForceAndCold) {
+    QueryRequest self_only;
+    self_only.separation = false;
+    self_only.self = true;
+    self_only.culler = CullerKind::bvh;
+    for (std::uint64_t seed = 50000; seed < 50020; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        for (const auto& m : test::random_scene(rng)) {
+            ASSERT_TRUE(bvh.scene().add_object(m).ok());
+        }
+        ASSERT_TRUE(bvh.scene().add_object({"many", many_components(rng, 12)}).ok());
+        ASSERT_TRUE(bvh.query(self_only).ok());  // builds, remembers the first answer
+        for (int frame = 1; frame <= 7; ++frame) {
+            SceneUpdate update;
+            const SceneObject& first = bvh.scene()[0];
+            if (frame == 3) {
+                TriangleMesh whole{first.vertices, first.topology->triangles()};
+                TriangleMesh half{whole.vertices, {}};
+                for (std::size_t t = 0; t < whole.triangles.size(); t += 2) {
+                    half.triangles.push_back(whole.triangles[t]);
+                }
+                update.replacements.push_back({first.id, {{"half", half}}});
+            }
+            if (frame == 5 && bvh.scene().size() > 2) {
+                update.removals.push_back(bvh.scene()[1].id);
+                update.additions.push_back({"new", many_components(rng, 6)});
+            }
+            for (const auto& o : bvh.scene().objects()) {
+                if ((frame == 3 && o.id == first.id) ||
+                    (frame == 5 && !update.removals.empty() && o.id == update.removals[0])) {
+                    continue;
+                }
+                std::vector<Vec3> v = test::jitter(rng, o.vertices, 0.05);
+                if (frame == 2 || frame == 6) {
+                    std::shuffle(v.begin(), v.end(), rng);  // a large move: stale closest pairs
+                }
+                update.positions.push_back({o.id, std::move(v)});
+            }
+            ASSERT_TRUE(bvh.scene().apply(std::move(update)).ok());
+            const std::string where =
+                "seed " + std::to_string(seed) + " frame " + std::to_string(frame);
+            if (frame == 4) {
+                // Positions only: the next self query seeds from an answer two frames old.
+                QueryRequest separation;
+                separation.culler = CullerKind::bvh;
+                ASSERT_TRUE(bvh.query(separation).ok());
+                continue;
+            }
+            auto warm = bvh.query(full_request(CullerKind::bvh, 0.05));
+            ASSERT_TRUE(warm.ok());
+            ProximityEngine brute;
+            for (const auto& o : bvh.scene().objects()) {
+                ASSERT_TRUE(
+                    brute.scene().add_object({o.name, {o.vertices, o.topology->triangles()}}).ok());
+            }
+            auto b = brute.query(full_request(CullerKind::brute, 0.05));
+            ASSERT_TRUE(b.ok());
+            expect_equal_answers(bvh.scene(), warm.value(), b.value(), where + " warm");
+            bvh.forget_coherence();
+            auto cold = bvh.query(self_only);
+            ASSERT_TRUE(cold.ok());
+            ASSERT_EQ(warm->self.size(), cold->self.size()) << where;
+            for (std::size_t i = 0; i < warm->self.size(); ++i) {
+                ASSERT_EQ(warm->self[i].size(), cold->self[i].size()) << where;
+                for (std::size_t t = 0; t < warm->self[i].size(); ++t) {
+                    const auto& w = warm->self[i][t];
+                    const auto& c = cold->self[i][t];
+                    EXPECT_TRUE(w.closest == c.closest && w.distance == c.distance &&
+                                w.point == c.point && w.other_point == c.other_point)
+                        << where << " object " << i << " triangle " << t << ": warm " << w.closest
+                        << " " << w.distance << " cold " << c.closest << " " << c.distance;
+                }
+            }
+            if (HasFailure()) {
+                return;
+            }
+        }
+    }
+}
+
 }  // namespace
 }  // namespace proxima

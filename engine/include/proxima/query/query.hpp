@@ -16,6 +16,7 @@
 #include <optional>
 #include <string>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 #include "proxima/cancel.hpp"
@@ -134,6 +135,14 @@ class ProximityEngine {
     void set_gpu_unavailable_reason(std::string reason) { m_gpu_reason = std::move(reason); }
     bool has_gpu_backend() const { return m_gpu_backend != nullptr; }
 
+    // Frame-to-frame coherence: a self query remembers each object's answer (every triangle's
+    // closest triangle), and the next self query on an object of the same topology also seeds
+    // each triangle's bound with an exact test against that triangle at the new positions, where
+    // it lies outside the triangle's 2-ring (an upper bound whatever the motion, so answers never
+    // depend on it). This forgets it: the next
+    // query runs cold (benchmarks compare warm and cold frames with it).
+    void forget_coherence() { m_self_memory.clear(); }
+
   private:
     StatusOr<Culler*> culler_for(CullerKind kind);
     CullerKind choose_automatic(const QueryRequest& request);
@@ -157,6 +166,13 @@ class ProximityEngine {
     std::array<AutoModel, 32> m_auto{};
     SweepAndPrune m_sap;
     std::uint64_t m_sap_generation = ~0ull;
+    // The last self answer per object (closest triangle per triangle, UINT32_MAX for none), with
+    // the topology it was computed on: hints only, every one is checked and tested again.
+    struct SelfMemory {
+        std::uint64_t topology_version = 0;
+        std::vector<std::uint32_t> closest;
+    };
+    std::unordered_map<ObjectId, SelfMemory> m_self_memory;
 };
 
 // Number of unordered non-adjacent triangle pairs within one object (brute-force work of a
