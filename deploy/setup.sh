@@ -33,7 +33,7 @@ packages=(
   clang-format clang-tidy
   # The CLI's JSON output against docs/json-output.schema.json (tests/cli/test_json_schema.py).
   python3-jsonschema
-  # proxima load --plot FILE.png: latency and throughput plots (gnuplot's pngcairo terminal).
+  # proxima load --plot FILE.png and docs/plots/plot_all.py: plots (gnuplot's pngcairo terminal).
   gnuplot-nox
   # Scale-out (docs/deploy.md): several daemons behind HAProxy (tests/scaleout/test_haproxy.py).
   haproxy

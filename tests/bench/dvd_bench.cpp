@@ -8,7 +8,11 @@
 // checked against the BVH culler's (separation and self distances, collision and tolerance pairs).
 //
 //   proxima_dvd_bench [--quick] [--frames N] [--cells f1,f2,...] [--queries LIST] [--no-gpu]
-//                     [--csv FILE] [--data DIR] [--scenes a,b,...]
+//                     [--csv FILE] [--json FILE] [--data DIR] [--scenes a,b,...]
+//
+// --csv and --json write the same rows (one per scene, query and culler configuration); the JSON
+// document adds the facts the table header prints (device, CPU model, load, frames) and is what
+// docs/plots/plot_all.py draws.
 //
 // --scenes names procedural scenes (skirt, cloth-ball, bowl, ramps, breaking) and real frame pairs
 // as real:<dir> (real:cloth-ball, real:n-body-simulation, real:armadillo-rollers,
@@ -39,6 +43,8 @@
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include "bench_util.hpp"
 
 #ifndef PROXIMA_DATA_DIR
@@ -57,6 +63,7 @@ struct Options {
     bool contact = true;
     bool gpu = true;
     std::string csv;
+    std::string json;
     std::string data = PROXIMA_DATA_DIR;
     std::vector<std::string> scenes;
 };
@@ -330,6 +337,57 @@ bool run_real(const std::string& dir_name, const Options& opt, Runner& runner,
     return true;
 }
 
+// A finite number, or null (a median over no frames, a BVH row's cell).
+nlohmann::json number(double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
+
+// The --csv rows as one JSON document, with the machine facts: what docs/plots/plot_all.py reads.
+void write_json(const Options& opt, const Runner& runner, const std::string& device) {
+    nlohmann::json cells = nlohmann::json::array();
+    for (const auto& c : opt.cells) {
+        cells.push_back(c);
+    }
+    nlohmann::json rows = nlohmann::json::array();
+    double bvh = 0;
+    for (const auto& s : runner.all()) {
+        const bool is_bvh = s.config.culler == CullerKind::bvh;
+        if (is_bvh) {
+            bvh = bench::median(s.exact);
+        }
+        rows.push_back({{"scene", s.scene},
+                        {"triangles", s.triangles},
+                        {"query", s.query},
+                        {"culler", culler_name(s.config.culler)},
+                        {"cell_factor", is_bvh ? nlohmann::json() : nlohmann::json(s.config.cell)},
+                        {"cell", is_bvh ? nlohmann::json() : number(bench::median(s.cell))},
+                        {"median_edge", number(s.median_edge)},
+                        {"samples", number(bench::median(s.samples))},
+                        {"dvd_ms", number(1e3 * bench::median(s.dvd))},
+                        {"stage2_ms", number(1e3 * bench::median(s.stage2))},
+                        {"total_ms", number(1e3 * bench::median(s.total))},
+                        {"exact_tests", number(bench::median(s.exact))},
+                        {"bvh_exact_tests", number(bvh)},
+                        {"brute_force_tests", number(bench::median(s.brute))},
+                        {"voronoi_culled", number(bench::median(s.culled))},
+                        {"mismatches", s.mismatches}});
+    }
+    const nlohmann::json doc = {{"tool", "proxima_dvd_bench"},
+                                {"device", device},
+                                {"cpu", bench::cpu_model()},
+                                {"load_average", bench::load_average()},
+                                {"frames", opt.frames},
+                                {"cells", cells},
+                                {"rows", rows}};
+    std::ofstream out(opt.json);
+    out << doc.dump(2) << "\n";
+    if (!out) {
+        std::cerr << "could not write " << opt.json << "\n";
+        std::exit(1);
+    }
+    std::cerr << "wrote " << opt.json << "\n";
+}
+
 void print(const Options& opt, const Runner& runner, const std::string& device) {
     std::ostream& out = std::cout;
     out << "\n# proxima_dvd_bench (" << device << ")\n\n";
@@ -378,6 +436,9 @@ void print(const Options& opt, const Runner& runner, const std::string& device) 
         }
         std::cerr << "wrote " << opt.csv << "\n";
     }
+    if (!opt.json.empty()) {
+        write_json(opt, runner, device);
+    }
 }
 
 }  // namespace
@@ -407,14 +468,17 @@ int main(int argc, char** argv) {
             opt.gpu = false;
         } else if (a == "--csv") {
             opt.csv = value();
+        } else if (a == "--json") {
+            opt.json = value();
         } else if (a == "--data") {
             opt.data = value();
         } else if (a == "--scenes") {
             opt.scenes = split(value());
         } else {
-            std::cerr << "usage: proxima_dvd_bench [--quick] [--frames N] [--cells f1,f2,...] "
-                         "[--queries nbody,contact] [--no-gpu] [--csv FILE] [--data DIR] "
-                         "[--scenes a,b,...]\n";
+            std::cerr
+                << "usage: proxima_dvd_bench [--quick] [--frames N] [--cells f1,f2,...] "
+                   "[--queries nbody,contact] [--no-gpu] [--csv FILE] [--json FILE] [--data DIR] "
+                   "[--scenes a,b,...]\n";
             return a == "--help" ? 0 : 2;
         }
     }
