@@ -11,6 +11,7 @@
 #include "proxima/render/snapshot.hpp"
 #include "proxima/wire/buffers.hpp"
 #include "proxima/wire/snapshot.hpp"
+#include "region_snapshot.hpp"
 #include "scene_registry.hpp"
 #include "service.hpp"
 #include "service_internal.hpp"
@@ -159,6 +160,15 @@ grpc::ServerUnaryReactor* ProximityService::Snapshot(grpc::CallbackServerContext
             auto decoded = wire::decode_snapshot_request(*request);
             if (!decoded.ok()) {
                 return decoded.status();
+            }
+            auto region = wire::decode_snapshot_region(*request);
+            if (!region.ok()) {
+                return region.status();
+            }
+            if (region->has_value()) {
+                // A massive model's region, through the shared geometry cache (no scene mutex).
+                return model_region_snapshot(*m_shared, *call->principal(), **region, *decoded,
+                                             call->cancel(), response, &extra);
             }
             auto entry = m_shared->scenes.find(request->scene_id(), *call->principal());
             if (!entry) {

@@ -3,9 +3,12 @@
 // Local mode renders in this process with the engine's own headless EGL context (llvmpipe where
 // there is no GPU); --server creates a scene with the files on the daemon, calls Snapshot (the
 // daemon renders with its context) and deletes the scene. Both run render::take_snapshot on the
-// same scene, so on the same renderer they write the same PNG bytes.
+// same scene, so on the same renderer they write the same PNG bytes. --server ADDR --model NAME
+// (with --center, --radius, --room, --max-triangles as for `proxima region`) renders a served
+// massive model's region on the daemon instead of files.
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <fstream>
 #include <memory>
@@ -38,6 +41,12 @@ struct SnapshotArgs {
     bool no_segments = false;
     std::string out;
     std::vector<std::string> files;
+    // A served massive model's region instead of files (--server only).
+    std::string model;
+    std::vector<double> center{0.0, 0.0, 0.0};
+    double radius = 0.0;
+    std::string room;
+    std::uint64_t max_triangles = 0;
 };
 
 // 6 or 9 comma-separated finite numbers: eye, target and optionally up.
@@ -114,6 +123,21 @@ StatusOr<render::Snapshot> snapshot_remote(const SnapshotArgs& args,
     return snapshot;
 }
 
+StatusOr<render::Snapshot> snapshot_model(const SnapshotArgs& args,
+                                          const render::SnapshotRequest& request) {
+    auto c = connect_server(args.server, args.server_flags, client::ConnectOptions{});
+    if (!c.ok()) {
+        return c.status();
+    }
+    client::RegionRequest region;
+    region.model = args.model;
+    region.center = {args.center[0], args.center[1], args.center[2]};
+    region.radius = args.radius;
+    region.room = args.room;
+    region.max_triangles = args.max_triangles;
+    return (*c)->snapshot_region(region, request);
+}
+
 std::string point_text(const Vec3& p) {
     char buffer[96];
     std::snprintf(buffer, sizeof buffer, "%.6g,%.6g,%.6g", p.x, p.y, p.z);
@@ -139,12 +163,29 @@ int run_snapshot(const SnapshotArgs& args) {
     if (Status s = render::validate_snapshot_request(request); !s.ok()) {
         return fail(s);
     }
-    auto objects = client::load_objects(args.files, args.split_components, weld_mode(args.weld));
-    if (!objects.ok()) {
-        return fail(objects.status());
+    if (!args.model.empty()) {
+        if (args.server.empty()) {
+            return fail(invalid_argument("--model: a model region needs --server ADDR"));
+        }
+        if (!args.files.empty()) {
+            return fail(invalid_argument("--model: give either mesh files or --model, not both"));
+        }
+        if (args.center.size() != 3) {
+            return fail(invalid_argument("--center is three numbers X,Y,Z"));
+        }
+    } else if (args.files.empty()) {
+        return fail(invalid_argument("files: give mesh files (or --server ADDR --model NAME)"));
     }
-    auto snapshot = args.server.empty() ? snapshot_local(*objects, request)
-                                        : snapshot_remote(args, *objects, request);
+    StatusOr<std::vector<client::InputObject>> objects = std::vector<client::InputObject>{};
+    if (args.model.empty()) {
+        objects = client::load_objects(args.files, args.split_components, weld_mode(args.weld));
+        if (!objects.ok()) {
+            return fail(objects.status());
+        }
+    }
+    auto snapshot = !args.model.empty()   ? snapshot_model(args, request)
+                    : args.server.empty() ? snapshot_local(*objects, request)
+                                          : snapshot_remote(args, *objects, request);
     if (!snapshot.ok()) {
         return fail(snapshot.status());
     }
@@ -161,11 +202,18 @@ int run_snapshot(const SnapshotArgs& args) {
         counts += ", " + std::to_string(snapshot->tolerance_count) + " within " + tol;
     }
     counts += ", " + std::to_string(snapshot->segment_count) + " closest-pair segments";
-    std::fprintf(
-        stderr, "snapshot: %dx%d PNG of %zu objects in %s (%s; camera %s -> %s, fov %.6g; %s)\n",
-        snapshot->width, snapshot->height, objects->size(), args.out.c_str(), counts.c_str(),
-        point_text(snapshot->camera.eye).c_str(), point_text(snapshot->camera.target).c_str(),
-        snapshot->camera.fov_degrees, snapshot->renderer.c_str());
+    std::string what = std::to_string(objects->size()) + " objects";
+    if (snapshot->region) {
+        what = "model " + args.model + " (" + std::to_string(snapshot->region->objects) +
+               " objects, " + std::to_string(snapshot->region->pieces) + " pieces, " +
+               std::to_string(snapshot->region->triangles) + " triangles" +
+               (snapshot->region->truncated ? ", cut at --max-triangles" : "") + ")";
+    }
+    std::fprintf(stderr, "snapshot: %dx%d PNG of %s in %s (%s; camera %s -> %s, fov %.6g; %s)\n",
+                 snapshot->width, snapshot->height, what.c_str(), args.out.c_str(), counts.c_str(),
+                 point_text(snapshot->camera.eye).c_str(),
+                 point_text(snapshot->camera.target).c_str(), snapshot->camera.fov_degrees,
+                 snapshot->renderer.c_str());
     return 0;
 }
 
@@ -206,7 +254,25 @@ void add_snapshot_command(CLI::App& app, int& exit_code) {
     cmd->add_flag("--no-collisions", args->no_collisions, "Do not colour collisions");
     cmd->add_flag("--no-segments", args->no_segments, "Do not draw closest-pair segments");
     cmd->add_option("--out", args->out, "The PNG file to write")->required();
-    cmd->add_option("files", args->files, "Mesh files (any format proxima reads)")->required();
+    cmd->add_option("files", args->files, "Mesh files (any format proxima reads)");
+    auto* model_opt = cmd->add_option("--model", args->model,
+                                      "Instead of files: a region of this massive model served "
+                                      "by --server (as `proxima region` selects it)");
+    model_opt->needs(server_opt);
+    cmd->add_option("--center", args->center, "With --model: the region's centre X,Y,Z")
+        ->delimiter(',')
+        ->expected(3)
+        ->needs(model_opt);
+    cmd->add_option("--radius", args->radius,
+                    "With --model: pieces whose boxes come within this distance (0: every piece)")
+        ->check(non_negative_number())
+        ->needs(model_opt);
+    cmd->add_option("--room", args->room, "With --model: a review room's edited view")
+        ->needs(model_opt);
+    cmd->add_option("--max-triangles", args->max_triangles,
+                    "With --model: only the nearest pieces up to this many triangles (0: the "
+                    "daemon's limit)")
+        ->needs(model_opt);
     cmd->callback([args, &exit_code] { exit_code = run_snapshot(*args); });
 }
 

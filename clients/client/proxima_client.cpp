@@ -717,6 +717,22 @@ StatusOr<render::Snapshot> Client::snapshot(const std::string& scene_id,
     return wire::decode_snapshot(response);
 }
 
+StatusOr<render::Snapshot> Client::snapshot_region(const massive::RegionRequest& region,
+                                                   const render::SnapshotRequest& request) {
+    pb::SnapshotRequest message;
+    wire::encode_model_snapshot_request(region, request, &message);
+    pb::SnapshotResponse response;
+    if (auto st = m_impl->unary("Snapshot", Retry::idempotent,
+                                [&](grpc::ClientContext& context) {
+                                    return m_impl->stub_now()->Snapshot(&context, message,
+                                                                        &response);
+                                });
+        !st.ok()) {
+        return st;
+    }
+    return wire::decode_snapshot(response);
+}
+
 StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& scene_id) {
     auto impl = std::make_unique<FrameStream::Impl>();
     impl->float32 = m_impl->options.float32_vertices;

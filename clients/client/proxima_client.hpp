@@ -309,6 +309,12 @@ class Client {
     // An offscreen PNG of the scene, results coloured (the Snapshot RPC; the scene is unchanged).
     StatusOr<render::Snapshot> snapshot(const std::string& scene_id,
                                         const render::SnapshotRequest& request);
+    // An offscreen PNG of a served massive model's region (the Snapshot RPC with `model`): the
+    // pieces FetchRegion would send for `region` (its model, center, radius, room and
+    // max_triangles; `objects` and `float64` are ignored), coloured and drawn as for a scene. The
+    // answer's `region` holds the pieces, triangles and objects drawn.
+    StatusOr<render::Snapshot> snapshot_region(const massive::RegionRequest& region,
+                                               const render::SnapshotRequest& request);
     // Opens a frame stream on an existing scene, or, with an empty scene_id, a stream-owned scene
     // created from the first frame's additions (deleted when the stream ends).
     StatusOr<std::unique_ptr<FrameStream>> open_stream(const std::string& scene_id);

@@ -433,6 +433,31 @@ def test_fetch_region(client: proxima.Client) -> None:
         assert e.value.code is code, kwargs
 
 
+def test_snapshot_region(client: proxima.Client) -> None:
+    """Snapshot of a model region: the pieces FetchRegion selects, drawn with their touching
+    pairs; exactly one of scene_id and model; the region's errors."""
+    near = client.fetch_region("row", (0.5, 0.5, 0.5), 1.5).result()
+    try:
+        shot = client.snapshot_region("row", (0.5, 0.5, 0.5), 1.5, width=40, height=30)
+    except proxima.ProximaError as e:
+        if e.code_name == "UNAVAILABLE" and not os.environ.get("CI"):
+            pytest.skip(f"no EGL context here: {e.details}")
+        raise
+    assert shot.png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert struct.unpack(">II", shot.png[16:24]) == (40, 30)
+    assert shot.region.pieces == near.summary.pieces
+    assert shot.region.triangles == near.summary.triangles
+    assert shot.region.objects == len({p.object for p in near.pieces})
+    assert shot.collision_count > 0  # boxes 0 and 1 touch
+    for kwargs, code in [({"model": "nope"}, "NOT_FOUND"),
+                         ({"model": "row", "radius": -1.0}, "INVALID_ARGUMENT"),
+                         ({"model": "row", "room": "none"}, "NOT_FOUND"),
+                         ({"model": ""}, "INVALID_ARGUMENT")]:
+        with pytest.raises(proxima.ProximaError) as e:
+            client.snapshot_region(width=8, height=8, **kwargs)
+        assert e.value.code_name == code, kwargs
+
+
 def test_review_room(client: proxima.Client) -> None:
     avatar = proxima.box("avatar", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))
     with client.review("room-1", "row", "ann", avatar, tolerance=0.2) as ann:

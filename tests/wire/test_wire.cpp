@@ -1173,6 +1173,67 @@ TEST(Wire, ModelListDecodes) {
 
 // Snapshot requests and answers: a round trip keeps every field; the daemon's decoding fills the
 // camera's defaults and refuses bad sizes, cameras and tolerances before any scene is looked at.
+// A model region's snapshot: the region's fields round-trip, exactly one of scene_id and model,
+// and the answer's region counts come back.
+TEST(Wire, ModelRegionSnapshotRoundTrip) {
+    massive::RegionRequest region;
+    region.model = "plant";
+    region.center = {1.5, -2, 0.25};
+    region.radius = 3;
+    region.room = "r1";
+    region.max_triangles = 1000;
+    render::SnapshotRequest request;
+    request.render.width = 64;
+    request.render.height = 48;
+    v1::SnapshotRequest message;
+    wire::encode_model_snapshot_request(region, request, &message);
+    EXPECT_TRUE(message.scene_id().empty());
+    auto decoded = wire::decode_snapshot_region(message);
+    ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+    ASSERT_TRUE(decoded->has_value());
+    EXPECT_EQ((*decoded)->model, "plant");
+    EXPECT_EQ((*decoded)->center, (Vec3{1.5, -2, 0.25}));
+    EXPECT_EQ((*decoded)->radius, 3);
+    EXPECT_EQ((*decoded)->room, "r1");
+    EXPECT_EQ((*decoded)->max_triangles, 1000u);
+    EXPECT_EQ(wire::decode_snapshot_request(message)->render.width, 64);
+
+    v1::SnapshotRequest both = message;
+    both.set_scene_id("s1");
+    EXPECT_EQ(wire::decode_snapshot_region(both).status().code(), StatusCode::invalid_argument);
+    v1::SnapshotRequest neither = message;
+    neither.clear_model();
+    EXPECT_EQ(wire::decode_snapshot_region(neither).status().code(), StatusCode::invalid_argument);
+    v1::SnapshotRequest scene;
+    wire::encode_snapshot_request("s1", request, &scene);
+    auto scene_region = wire::decode_snapshot_region(scene);
+    ASSERT_TRUE(scene_region.ok());
+    EXPECT_FALSE(scene_region->has_value());
+    scene.set_room("r1");
+    EXPECT_EQ(wire::decode_snapshot_region(scene).status().code(), StatusCode::invalid_argument);
+
+    render::Snapshot snapshot;
+    snapshot.png = "png";
+    snapshot.width = 64;
+    snapshot.height = 48;
+    snapshot.region = render::SnapshotRegion{7, 84, 3, true, 2, "gen-000001"};
+    v1::SnapshotResponse response;
+    wire::encode_snapshot(snapshot, &response);
+    auto back = wire::decode_snapshot(response);
+    ASSERT_TRUE(back.ok()) << back.status().to_string();
+    ASSERT_TRUE(back->region.has_value());
+    EXPECT_EQ(back->region->pieces, 7u);
+    EXPECT_EQ(back->region->triangles, 84u);
+    EXPECT_EQ(back->region->objects, 3u);
+    EXPECT_TRUE(back->region->truncated);
+    EXPECT_EQ(back->region->model_version, 2u);
+    EXPECT_EQ(back->region->generation, "gen-000001");
+    snapshot.region.reset();
+    response.Clear();
+    wire::encode_snapshot(snapshot, &response);
+    EXPECT_FALSE(wire::decode_snapshot(response)->region.has_value());
+}
+
 TEST(Wire, SnapshotRoundTripAndValidation) {
     render::SnapshotRequest request;
     request.render.width = 320;

@@ -594,6 +594,33 @@ class Client:
             request.camera.fov_degrees = float(fov)
         return self._unary(self.stub.Snapshot, request)
 
+    def snapshot_region(self, model: str, center: ArrayLike = (0.0, 0.0, 0.0),
+                        radius: float = 0.0, room: str = "", max_triangles: int = 0,
+                        width: int = 800, height: int = 600,
+                        camera: Optional[Tuple[ArrayLike, ArrayLike, Optional[ArrayLike],
+                                               float]] = None,
+                        collisions: bool = True, tolerance: Optional[float] = None,
+                        separation: bool = True) -> Any:
+        """Snapshot of a served massive model's region (the pieces FetchRegion selects for
+        `center`, `radius`, `room`, `max_triangles`), coloured as snapshot() colours a scene.
+        The SnapshotResponse, its `region` holding the pieces, triangles and objects drawn."""
+        request = pb.SnapshotRequest(model=model, radius=float(radius), room=room,
+                                     max_triangles=max_triangles, width=width, height=height,
+                                     collisions=collisions, separation=separation)
+        request.center.CopyFrom(pb.Vec3(x=float(center[0]), y=float(center[1]),
+                                        z=float(center[2])))
+        if tolerance is not None:
+            request.tolerance = tolerance
+        if camera is not None:
+            eye, target, up, fov = camera
+            vec = lambda v: pb.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa: E731
+            request.camera.eye.CopyFrom(vec(eye))
+            request.camera.target.CopyFrom(vec(target))
+            if up is not None:
+                request.camera.up.CopyFrom(vec(up))
+            request.camera.fov_degrees = float(fov)
+        return self._unary(self.stub.Snapshot, request)
+
     # --- frames ---------------------------------------------------------------------------
 
     def query(self, scene_id: str, **frame_args: Any) -> Result:

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <optional>
+#include <utility>
 
 #include "proxima/wire/buffers.hpp"
 
@@ -68,6 +70,45 @@ StatusOr<render::SnapshotRequest> decode_snapshot_request(const v1::SnapshotRequ
     return out;
 }
 
+void encode_model_snapshot_request(const massive::RegionRequest& region,
+                                   const render::SnapshotRequest& request,
+                                   v1::SnapshotRequest* out) {
+    encode_snapshot_request({}, request, out);
+    out->set_model(region.model);
+    encode_vec3(region.center, out->mutable_center());
+    out->set_radius(region.radius);
+    out->set_room(region.room);
+    out->set_max_triangles(region.max_triangles);
+}
+
+StatusOr<std::optional<massive::RegionRequest>> decode_snapshot_region(
+    const v1::SnapshotRequest& request) {
+    if (!request.scene_id().empty() && !request.model().empty()) {
+        return invalid_argument("snapshot: set one of scene_id and model, not both (scene '" +
+                                request.scene_id() + "', model '" + request.model() + "')");
+    }
+    if (request.scene_id().empty() && request.model().empty()) {
+        return invalid_argument(
+            "snapshot: set scene_id (a scene) or model (a massive model's region)");
+    }
+    if (request.model().empty()) {
+        if (!request.room().empty() || request.has_center() || request.radius() != 0 ||
+            request.max_triangles() != 0) {
+            return invalid_argument(
+                "snapshot: center, radius, room and max_triangles are for a model region (set "
+                "model, not scene_id)");
+        }
+        return std::optional<massive::RegionRequest>{};
+    }
+    massive::RegionRequest out;
+    out.model = request.model();
+    out.center = decode_vec3(request.center());
+    out.radius = request.radius();
+    out.room = request.room();
+    out.max_triangles = request.max_triangles();
+    return std::optional<massive::RegionRequest>(std::move(out));
+}
+
 void encode_snapshot(const render::Snapshot& snapshot, v1::SnapshotResponse* out) {
     out->set_png(snapshot.png);
     encode_camera(snapshot.camera, out->mutable_camera());
@@ -77,6 +118,15 @@ void encode_snapshot(const render::Snapshot& snapshot, v1::SnapshotResponse* out
     out->set_collision_count(snapshot.collision_count);
     out->set_tolerance_count(snapshot.tolerance_count);
     out->set_segment_count(snapshot.segment_count);
+    if (snapshot.region) {
+        auto* region = out->mutable_region();
+        region->set_pieces(snapshot.region->pieces);
+        region->set_triangles(snapshot.region->triangles);
+        region->set_objects(snapshot.region->objects);
+        region->set_truncated(snapshot.region->truncated);
+        region->set_model_version(snapshot.region->model_version);
+        region->set_generation(snapshot.region->generation);
+    }
 }
 
 StatusOr<render::Snapshot> decode_snapshot(const v1::SnapshotResponse& response) {
@@ -95,6 +145,16 @@ StatusOr<render::Snapshot> decode_snapshot(const v1::SnapshotResponse& response)
     out.collision_count = response.collision_count();
     out.tolerance_count = response.tolerance_count();
     out.segment_count = response.segment_count();
+    if (response.has_region()) {
+        render::SnapshotRegion region;
+        region.pieces = response.region().pieces();
+        region.triangles = response.region().triangles();
+        region.objects = response.region().objects();
+        region.truncated = response.region().truncated();
+        region.model_version = response.region().model_version();
+        region.generation = response.region().generation();
+        out.region = std::move(region);
+    }
     return out;
 }
 

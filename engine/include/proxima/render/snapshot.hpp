@@ -123,6 +123,16 @@ struct SnapshotRequest {
     bool segments = true;             // separation's closest pairs as segments
 };
 
+// A model region's snapshot: what was drawn (render/region_snapshot.hpp).
+struct SnapshotRegion {
+    std::uint64_t pieces = 0;
+    std::uint64_t triangles = 0;
+    std::uint64_t objects = 0;        // model objects with at least one piece drawn
+    bool truncated = false;           // max_triangles left selected pieces out
+    std::uint64_t model_version = 0;  // the room's version seen (0 without a room)
+    std::string generation;
+};
+
 struct Snapshot {
     std::string png;
     Camera camera;  // the camera used
@@ -132,6 +142,7 @@ struct Snapshot {
     std::size_t collision_count = 0;  // triangle pairs coloured red
     std::size_t tolerance_count = 0;  // triangle pairs within the tolerance
     std::size_t segment_count = 0;
+    std::optional<SnapshotRegion> region;  // set for a model region's snapshot
 };
 
 // Checks the size, the camera (when set) and the tolerance without touching the scene or GL.
