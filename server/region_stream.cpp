@@ -53,39 +53,13 @@ class RegionReactor final : public BoundedWriteStream<v1::RegionEvent> {
         }
         const massive::RegionRequest request = std::move(decoded).value();
         const auto& who = *m_admission.principal();
-        auto model = find_model(m_shared, who, request.model);
-        if (!model.ok()) {
-            return model.status();
+        auto view = find_model_view(m_shared, who, request.model, request.room);
+        if (!view.ok()) {
+            return view.status();
         }
-        std::shared_ptr<const massive::Store> store = model.value()->store;
-        std::shared_ptr<const massive::ModelView::Snapshot> snapshot;
-        std::uint32_t object_count = static_cast<std::uint32_t>(store->objects().size());
-        if (!request.room.empty()) {
-            // The room's access, as for joining it (Review).
-            if (!who.may_join_room(request.room)) {
-                return {StatusCode::permission_denied,
-                        "token '" + who.name() + "' may not see review room '" + request.room +
-                            "' (no pattern of its rooms matches)"};
-            }
-            const std::shared_ptr<Room> room = m_shared.rooms.find(request.room);
-            if (!room) {
-                return not_found("room " + request.room +
-                                 " does not exist (a room lives while it has members)");
-            }
-            if (room->model().name != request.model) {
-                return failed_precondition("room " + request.room + " reviews model '" +
-                                           room->model().name + "', not '" + request.model + "'");
-            }
-            // The room's view is on the store the room opened (the same generation its members
-            // see), and one snapshot of it: every piece comes from one model version.
-            store = room->view()->store();
-            snapshot = room->view()->snapshot();
-            object_count = static_cast<std::uint32_t>(store->objects().size());
-            for (const auto& o : snapshot->overlay) {
-                object_count = std::max(object_count, o.object + 1);
-            }
-        }
-        if (Status s = massive::check_region_request(request, object_count); !s.ok()) {
+        const std::shared_ptr<const massive::Store> store = view->store;
+        const std::shared_ptr<const massive::ModelView::Snapshot> snapshot = view->room_view;
+        if (Status s = massive::check_region_request(request, view->object_count); !s.ok()) {
             return s;
         }
         {

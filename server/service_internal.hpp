@@ -274,6 +274,55 @@ inline StatusOr<std::shared_ptr<const ModelEntry>> find_model(ProximityService::
     return shared.models.find(name);
 }
 
+// What a viewer of a model sees (FetchRegion, a model-region Snapshot): the model's store, or,
+// with a room, the store the room opened (the generation its members see) and one version of the
+// room's edited view, so every piece comes from one model version; object indices below
+// object_count exist or existed.
+struct ViewedModel {
+    std::shared_ptr<const massive::Store> store;
+    std::shared_ptr<const massive::ModelView::Snapshot> room_view;  // null without a room
+    std::uint32_t object_count = 0;
+};
+
+// The model (find_model's rules), and with `room` the room's view: the room's access as for
+// joining it (PERMISSION_DENIED), NOT_FOUND for no such room, FAILED_PRECONDITION for a room on
+// another model.
+inline StatusOr<ViewedModel> find_model_view(ProximityService::Shared& shared, const Principal& who,
+                                             const std::string& model_name,
+                                             const std::string& room_name) {
+    auto model = find_model(shared, who, model_name);
+    if (!model.ok()) {
+        return model.status();
+    }
+    ViewedModel out;
+    out.store = model.value()->store;
+    if (!room_name.empty()) {
+        if (!who.may_join_room(room_name)) {
+            return Status(StatusCode::permission_denied,
+                          "token '" + who.name() + "' may not see review room '" + room_name +
+                              "' (no pattern of its rooms matches)");
+        }
+        const std::shared_ptr<Room> room = shared.rooms.find(room_name);
+        if (!room) {
+            return not_found("room " + room_name +
+                             " does not exist (a room lives while it has members)");
+        }
+        if (room->model().name != model_name) {
+            return failed_precondition("room " + room_name + " reviews model '" +
+                                       room->model().name + "', not '" + model_name + "'");
+        }
+        out.store = room->view()->store();
+        out.room_view = room->view()->snapshot();
+    }
+    out.object_count = static_cast<std::uint32_t>(out.store->objects().size());
+    if (out.room_view) {
+        for (const auto& o : out.room_view->overlay) {
+            out.object_count = std::max(out.object_count, o.object + 1);
+        }
+    }
+    return out;
+}
+
 // A unary call: the method fills the response on the worker pool (or inline when it is cheap)
 // and calls complete() last. The reactor deletes itself in OnDone, which gRPC may run as soon as
 // Finish is called, so nothing may touch it after complete().
