@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Short fuzz run for CI: builds the libFuzzer targets with clang in build/fuzz, runs each on its
-# committed corpus (and kept crashers) for SECONDS_PER_TARGET seconds (default 20), one process,
+# committed corpus (and kept crashers) for SECONDS_PER_TARGET seconds (default 10), one process,
 # and fails on any crash, leak, timeout (FUZZ_TIMEOUT, default 3 s per input) or out-of-memory.
 # New inputs go to a scratch directory, never into the repository. Prints the executions done per
 # target and the time taken.
@@ -9,7 +9,7 @@
 #
 # Long runs: tests/fuzz/run.sh; the targets and totals: docs/reliability.md ("Fuzzing").
 set -euo pipefail
-seconds="${1:-20}"
+seconds="${1:-10}"
 # shellcheck source=common.sh
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
