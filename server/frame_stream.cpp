@@ -5,6 +5,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -45,10 +46,48 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
     }
 
     Status handle(v1::Frame& frame, std::uint64_t bytes) override {
+        return answer(frame, bytes, nullptr);
+    }
+
+    // A frame that finds the stream idle is run on the gRPC thread that read it when its work is
+    // small and bounded: the stream is bound to a scene of few objects (the answer lists them
+    // all), the frame only moves vertices, at most INLINE_FRAME_BYTES of them, and asks no query.
+    // Saves the hop to a worker and back (issue #16: the per-frame overhead of a 15K-vertex
+    // frame). m_scene is only changed by the stream's task, which is not running (idle).
+    static constexpr std::uint64_t INLINE_FRAME_BYTES = 512u << 10;
+    static constexpr std::uint64_t INLINE_SCENE_OBJECTS = 1024;
+
+    bool inline_candidate_locked(const v1::Frame& frame, std::uint64_t bytes) override {
+        if (!m_scene || m_scene->object_count.load() > INLINE_SCENE_OBJECTS ||
+            frame.additions_size() != 0 || frame.topology_changes_size() != 0 ||
+            frame.removals_size() != 0 || bytes > INLINE_FRAME_BYTES) {
+            return false;
+        }
+        const auto& q = frame.queries();
+        return !q.separation() && !q.self() && !q.collisions() && !q.has_tolerance() && !q.pns() &&
+               !q.ccd() && !q.penetration();
+    }
+
+    // A gRPC thread never waits: when the scene is busy (another call's frame or query), the
+    // frame goes to a worker, untouched (not admitted, nothing charged or released).
+    std::optional<Status> handle_inline(v1::Frame& frame, std::uint64_t bytes) override {
+        std::unique_lock scene_lock(m_scene->mutex, std::try_to_lock);
+        if (!scene_lock.owns_lock()) {
+            return std::nullopt;
+        }
+        return answer(frame, bytes, &scene_lock);
+    }
+
+    // One frame answered (queued for writing), or its error. `scene_lock`: the scene's mutex,
+    // held by the caller (released once the frame has run), or null.
+    Status answer(v1::Frame& frame, std::uint64_t bytes, std::unique_lock<std::mutex>* scene_lock) {
         v1::FrameResult result;
         Status s = m_admission.principal()->admit_frame();
         if (s.ok()) {
-            s = guarded([&] { return run(frame, &result); });
+            s = guarded([&] { return run(frame, &result, scene_lock != nullptr); });
+        }
+        if (scene_lock != nullptr) {
+            scene_lock->unlock();
         }
         m_admission.principal()->release_in_flight(bytes);
         if (!s.ok()) {
@@ -92,7 +131,8 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
 
     // One frame, off the lock. m_scene and m_owns_scene are only touched here (one task at a
     // time) and in OnDone (after the last task).
-    Status run(const v1::Frame& frame, v1::FrameResult* out) {
+    // `scene_locked`: the caller holds the bound scene's mutex (handle_inline).
+    Status run(const v1::Frame& frame, v1::FrameResult* out, bool scene_locked) {
         const auto& limits = m_shared.config.limits;
         if (m_scene) {
             if (!frame.scene_id().empty() && frame.scene_id() != m_scene->id) {
@@ -100,7 +140,7 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
                                         frame.scene_id() + " but this stream is bound to scene " +
                                         m_scene->id);
             }
-            return run_frame(*m_scene, frame, limits, &m_cancel, out);
+            return run_frame(*m_scene, frame, limits, &m_cancel, out, {}, scene_locked);
         }
         const auto& principal = m_admission.principal();
         if (!frame.scene_id().empty()) {

@@ -54,14 +54,17 @@ Holding holding_after(const Scene& scene, const SceneUpdate& update) {
 
 Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits,
                  const CancelToken* cancel, v1::FrameResult* out,
-                 const std::function<Status()>& after_apply) {
+                 const std::function<Status()>& after_apply, bool scene_locked) {
     const auto start = std::chrono::steady_clock::now();
     auto decoded = wire::decode_frame(frame);
     if (!decoded.ok()) {
         return decoded.status();
     }
     const bool self_points = decoded->self_points;
-    std::lock_guard lock(entry.mutex);
+    std::unique_lock lock(entry.mutex, std::defer_lock);
+    if (!scene_locked) {
+        lock.lock();
+    }
     if (entry.deleted.load()) {
         return not_found("scene " + entry.id + " was deleted");
     }

@@ -6,9 +6,13 @@
 // past that, no read is started, so gRPC's flow control pushes back on the client instead of the
 // daemon buffering). One worker task at a time handles the stream's requests in order; what it
 // answers (and, for a review member, what the room sends) is written in order, one write
-// outstanding. A stream ends with OK when the client half-closed and everything read is answered,
-// with UNAVAILABLE when the daemon drains, with the first error of a request (after the answers
-// already made are written), or CANCELLED when the client went away.
+// outstanding. A small request that finds the stream idle (no task running, nothing queued) may
+// be handled at once on the gRPC thread that read it, without the hop to a worker and back, when
+// the derived stream says it is cheap and can run without waiting (StreamFrames: a frame that
+// only moves a few vertices; handle_inline); the stream's task is then that thread, so the order
+// and every rule below are the same. A stream ends with OK when the client half-closed and
+// everything read is answered, with UNAVAILABLE when the daemon drains, with the first error of a
+// request (after the answers already made are written), or CANCELLED when the client went away.
 //
 // Every state change happens under the stream's mutex (mutex()). Finish is called exactly once,
 // by maybe_finish_locked(), and only when no worker task runs and no write is outstanding
@@ -44,7 +48,7 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
     OrderedStream& operator=(const OrderedStream&) = delete;
 
     void OnReadDone(bool ok) final {
-        std::lock_guard lock(mutex());
+        std::unique_lock lock(mutex());
         m_reading = false;
         if (!ok) {
             m_read_done = true;  // half-close (or the call is going away)
@@ -67,7 +71,13 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         start_read_if_room_locked();
         if (!m_processing) {
             m_processing = true;
-            m_shared.pool.submit([this] { process(); });
+            // Idle: the request just queued is the only one.
+            if (inline_candidate_locked(m_requests.front().request, m_requests.front().charged)) {
+                lock.unlock();
+                process(true);
+                return;
+            }
+            m_shared.pool.submit([this] { process(false); });
         }
     }
 
@@ -178,6 +188,17 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
     // derived stream under the lock, followed by answers_ready_locked(). An error ends the
     // stream with it (after the answers already queued are written).
     virtual Status handle(Request& request, std::uint64_t charged) = 0;
+    // Whether a request that finds the stream idle is worth trying on the gRPC thread that read
+    // it (handle_inline): only for work that is small and bounded. `charged`: what
+    // on_read_locked charged for it. Under the lock.
+    virtual bool inline_candidate_locked(const Request& /*request*/, std::uint64_t /*charged*/) {
+        return false;
+    }
+    // handle() on a gRPC thread, which must never wait (for another call's lock, say): nullopt
+    // when it would, having changed nothing (the request then goes to a worker's handle()).
+    virtual std::optional<Status> handle_inline(Request& /*request*/, std::uint64_t /*charged*/) {
+        return std::nullopt;
+    }
     // A request failed: runs off the lock before the error is recorded (Review leaves its room
     // at once, so the others see it go).
     virtual void on_failed() {}
@@ -305,9 +326,11 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         this->Finish(wire::to_grpc(final));
     }
 
-    // The worker task: the queued requests in order, until none is left or the stream stops.
-    void process() {
-        for (;;) {
+    // The stream's task: the queued requests in order, until none is left or the stream stops.
+    // `on_grpc_thread`: run by OnReadDone for the one request it queued (inline_candidate_locked),
+    // which is tried with handle_inline; whatever else is queued by then goes to a worker.
+    void process(bool on_grpc_thread) {
+        for (bool first = true;; first = false) {
             Queued next;
             {
                 std::lock_guard lock(mutex());
@@ -316,10 +339,39 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
                     maybe_finish_locked();
                     return;
                 }
+                if (on_grpc_thread && !first) {
+                    m_shared.pool.submit([this] { process(false); });
+                    return;
+                }
                 next = std::move(m_requests.front());
                 m_requests.pop_front();
             }
-            Status s = guarded([&] { return handle(next.request, next.charged); });
+            Status s;
+            if (on_grpc_thread) {
+                std::optional<Status> done;
+                s = guarded([&] {
+                    done = handle_inline(next.request, next.charged);
+                    return Status{};
+                });
+                if (s.ok() && !done) {
+                    // It would have waited: back to the front of the queue, for a worker.
+                    std::lock_guard lock(mutex());
+                    if (stopped_locked()) {
+                        on_dropped_locked(next.charged);
+                        m_processing = false;
+                        maybe_finish_locked();
+                        return;
+                    }
+                    m_requests.push_front(std::move(next));
+                    m_shared.pool.submit([this] { process(false); });
+                    return;
+                }
+                if (s.ok()) {
+                    s = *done;
+                }
+            } else {
+                s = guarded([&] { return handle(next.request, next.charged); });
+            }
             if (s.ok()) {
                 continue;
             }

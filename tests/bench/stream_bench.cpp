@@ -42,7 +42,7 @@ using Clock = std::chrono::steady_clock;
 struct Daemon {
     pid_t pid = -1;
     std::string address;
-    explicit Daemon(const char* echo_self = nullptr) {
+    explicit Daemon(const char* proximad, const char* echo_self = nullptr) {
         int out[2];
         if (pipe(out) != 0) {
             std::perror("pipe");
@@ -56,8 +56,8 @@ struct Daemon {
             if (echo_self != nullptr) {
                 execl(echo_self, echo_self, "--echo-server", static_cast<char*>(nullptr));
             } else {
-                execl(PROXIMAD_PATH, PROXIMAD_PATH, "--listen", "127.0.0.1:0", "--log-level",
-                      "warn", static_cast<char*>(nullptr));
+                execl(proximad, proximad, "--listen", "127.0.0.1:0", "--log-level", "warn",
+                      static_cast<char*>(nullptr));
             }
             std::perror("exec");
             _exit(127);
@@ -235,8 +235,53 @@ double percentile(std::vector<double> v, double p) {
     return v[std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5))];
 }
 
-void overhead(const std::string& address, const std::string& echo_address, int nx, int ny, bool f32,
-              int frames) {
+// One overhead case's figures (milliseconds), a row of the table.
+struct Row {
+    std::size_t vertices = 0;
+    bool f32 = false;
+    std::size_t frame_bytes = 0;
+    double rtt50 = 0, server50 = 0, over50 = 0, over99 = 0, echo50 = 0, ack50 = 0;
+};
+
+void print_header() {
+    std::printf(
+        "| vertices | buffer | frame bytes | round trip p50 | server p50 | overhead p50 | "
+        "overhead p99 | echo p50 | ack p50 | overhead / echo | overhead / ack |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+}
+
+void print_row(const Row& r) {
+    std::printf("| %zu | %s | %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2fx | %.2fx |\n",
+                r.vertices, r.f32 ? "float32" : "float64", r.frame_bytes, r.rtt50, r.server50,
+                r.over50, r.over99, r.echo50, r.ack50, r.over50 / r.echo50, r.over50 / r.ack50);
+    std::fflush(stdout);
+}
+
+double median(std::vector<double> v) {
+    return percentile(std::move(v), 0.5);
+}
+
+// Each column's median over the repeats (the ratios: of the medians).
+Row median_row(const std::vector<Row>& rows) {
+    Row out = rows.front();
+    auto column = [&](double Row::*field) {
+        std::vector<double> v;
+        for (const auto& r : rows) {
+            v.push_back(r.*field);
+        }
+        return median(std::move(v));
+    };
+    out.rtt50 = column(&Row::rtt50);
+    out.server50 = column(&Row::server50);
+    out.over50 = column(&Row::over50);
+    out.over99 = column(&Row::over99);
+    out.echo50 = column(&Row::echo50);
+    out.ack50 = column(&Row::ack50);
+    return out;
+}
+
+Row overhead(const std::string& address, const std::string& echo_address, int nx, int ny, bool f32,
+             int frames) {
     client::ConnectOptions opts;
     opts.float32_vertices = f32;
     opts.inline_mesh_bytes = 64u << 20;
@@ -302,12 +347,17 @@ void overhead(const std::string& address, const std::string& echo_address, int n
     }
     (void)stream.value()->finish();
     (void)c.value()->delete_scene(scene->scene_id);
-    const double over50 = percentile(over, 0.5);
-    std::printf("| %zu | %s | %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2fx | %.2fx |\n",
-                mesh.vertices.size(), f32 ? "float32" : "float64", frame_bytes,
-                percentile(rtt, 0.5), percentile(server, 0.5), over50, percentile(over, 0.99),
-                percentile(echo_ms, 0.5), percentile(ack_ms, 0.5),
-                over50 / percentile(echo_ms, 0.5), over50 / percentile(ack_ms, 0.5));
+    Row row;
+    row.vertices = mesh.vertices.size();
+    row.f32 = f32;
+    row.frame_bytes = frame_bytes;
+    row.rtt50 = percentile(rtt, 0.5);
+    row.server50 = percentile(server, 0.5);
+    row.over50 = percentile(over, 0.5);
+    row.over99 = percentile(over, 0.99);
+    row.echo50 = percentile(echo_ms, 0.5);
+    row.ack50 = percentile(ack_ms, 0.5);
+    return row;
 }
 
 void throughput(const std::string& address, int streams, double seconds) {
@@ -383,39 +433,112 @@ void throughput(const std::string& address, int streams, double seconds) {
                 percentile(all, 0.5), percentile(all, 0.99));
 }
 
+void usage(const char* argv0) {
+    std::fprintf(stderr,
+                 "usage: %s [--quick] [--overhead-only] [--only VERTICES:float32|float64]\n"
+                 "          [--frames N] [--repeat N] [--proximad PATH]\n"
+                 "  --quick          the CI smoke run (few frames, short throughput runs)\n"
+                 "  --overhead-only  skip the concurrent-streams part\n"
+                 "  --only V:T       only the overhead case of V vertices (15000 or 150000) and\n"
+                 "                   buffer T, e.g. 15000:float32\n"
+                 "  --frames N       frames per 15K case (default 200; 150K cases: 30%%)\n"
+                 "  --repeat N       the overhead table N times, then each case's medians over\n"
+                 "                   the repeats (the machine is shared: compare medians)\n"
+                 "  --proximad PATH  the daemon to start (default: this build's)\n",
+                 argv0);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     bool quick = false;
+    bool overhead_only = false;
+    std::string only;
+    int frames_arg = 0;
+    int repeat = 1;
+    const char* proximad = PROXIMAD_PATH;
     for (int i = 1; i < argc; ++i) {
+        const bool has_value = i + 1 < argc;
         if (std::strcmp(argv[i], "--quick") == 0) {
             quick = true;
         } else if (std::strcmp(argv[i], "--echo-server") == 0) {
             return run_echo_server();
+        } else if (std::strcmp(argv[i], "--overhead-only") == 0) {
+            overhead_only = true;
+        } else if (std::strcmp(argv[i], "--only") == 0 && has_value) {
+            only = argv[++i];
+        } else if (std::strcmp(argv[i], "--frames") == 0 && has_value) {
+            frames_arg = std::atoi(argv[++i]);
+        } else if (std::strcmp(argv[i], "--repeat") == 0 && has_value) {
+            repeat = std::atoi(argv[++i]);
+        } else if (std::strcmp(argv[i], "--proximad") == 0 && has_value) {
+            proximad = argv[++i];
+        } else if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+            usage(argv[0]);
+            return 0;
         } else {
-            std::fprintf(stderr, "usage: %s [--quick]\n", argv[0]);
+            usage(argv[0]);
             return 2;
         }
     }
-    Daemon daemon;
-    Daemon echo("/proc/self/exe");
-    std::printf("proximad at %s, echo server at %s; %u hardware threads\n\n",
+    if (repeat < 1 || frames_arg < 0 || (frames_arg > 0 && frames_arg < 10)) {
+        std::fprintf(stderr, "--repeat must be >= 1 and --frames >= 10\n");
+        return 2;
+    }
+    Daemon daemon(proximad);
+    Daemon echo(proximad, "/proc/self/exe");
+    std::printf("proximad (%s) at %s, echo server at %s; %u hardware threads\n\n", proximad,
                 daemon.address.c_str(), echo.address.c_str(), std::thread::hardware_concurrency());
     std::printf(
         "Round trip per frame, positions only, lockstep (ms; overhead = round trip - server "
         "time; echo and ack: the same serialized frame over a bare gRPC stream, answered with "
         "the same bytes or with an empty message, interleaved with the daemon's frames)\n\n");
-    std::printf(
-        "| vertices | buffer | frame bytes | round trip p50 | server p50 | overhead p50 | "
-        "overhead p99 | echo p50 | ack p50 | overhead / echo | overhead / ack |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
-    const int frames = quick ? 8 : 200;
+    const int frames = frames_arg > 0 ? frames_arg : (quick ? 8 : 200);
+    const int large_frames = frames_arg > 0 ? std::max(10, frames_arg * 3 / 10) : (quick ? 5 : 60);
+    struct Case {
+        int nx, ny;
+        bool f32;
+        std::vector<Row> rows;
+    };
+    std::vector<Case> cases;
     for (bool f32 : {true, false}) {
-        overhead(daemon.address, echo.address, 150, 100, f32, frames);          // 15,000
-        overhead(daemon.address, echo.address, 500, 300, f32, quick ? 5 : 60);  // 150,000
+        for (auto [nx, ny] : {std::pair{150, 100}, std::pair{500, 300}}) {
+            const std::string name = std::to_string(nx * ny) + (f32 ? ":float32" : ":float64");
+            if (only.empty() || only == name) {
+                cases.push_back({nx, ny, f32, {}});
+            }
+        }
+    }
+    if (cases.empty()) {
+        std::fprintf(stderr, "--only %s matches no case (15000 or 150000, float32 or float64)\n",
+                     only.c_str());
+        return 2;
+    }
+    for (int r = 0; r < repeat; ++r) {
+        if (repeat > 1) {
+            std::printf("Repeat %d of %d\n\n", r + 1, repeat);
+        }
+        print_header();
+        for (auto& c : cases) {
+            c.rows.push_back(overhead(daemon.address, echo.address, c.nx, c.ny, c.f32,
+                                      c.nx * c.ny > 20000 ? large_frames : frames));
+            print_row(c.rows.back());
+        }
+        std::printf("\n");
+    }
+    if (repeat > 1) {
+        std::printf("Medians over the %d repeats (each column's median on its own)\n\n", repeat);
+        print_header();
+        for (auto& c : cases) {
+            print_row(median_row(c.rows));
+        }
+        std::printf("\n");
+    }
+    if (overhead_only) {
+        return 0;
     }
     std::printf(
-        "\nConcurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "
+        "Concurrent streams, scene 'bowl' (11 objects, 4.5K triangles), separation per "
         "frame, lockstep\n\n");
     std::printf("| streams | frames/s (all streams) | latency p50 ms | latency p99 ms |\n");
     std::printf("|---|---|---|---|\n");

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -17,6 +18,7 @@
 
 #include "client/proxima_client.hpp"
 #include "daemon_process.hpp"
+#include "proxima/frame_pipeline.hpp"
 #include "proxima/query/query.hpp"
 #include "proxima/scenes/procedural.hpp"
 #include "support/random_scenes.hpp"
@@ -178,6 +180,93 @@ TEST(Sessions, TopologyChangeMidStreamMatchesInProcess) {
     ASSERT_TRUE(described.ok());
     EXPECT_EQ(described->frames, 6u);
     EXPECT_GT(described->objects.size(), sc.initial.size());  // fragments replaced the balls
+}
+
+// Frames that only move vertices may be answered on the gRPC thread that read them (no query,
+// a small frame, the stream idle, the scene free), the others by a worker; a move-only frame that
+// finds the scene held by another call goes to a worker too. Whichever path each frame takes,
+// the answers come back in order and every query sees exactly the moves sent before it: frames
+// are pipelined three at a time (some find the stream busy), and another client describes the
+// same scene throughout (holding its mutex now and then, without touching its engine, whose
+// answers must stay those of the in-process one).
+TEST(Sessions, MoveOnlyFramesInterleavedWithQueriesMatchInProcess) {
+    DaemonProcess daemon;
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const auto sc = scenes::bowl(40);
+    auto scene = c->create_scene("bowl", sc.initial);
+    ASSERT_TRUE(scene.ok()) << scene.status().to_string();
+    ProximityEngine local;
+    for (const auto& m : sc.initial) {
+        ASSERT_TRUE(local.scene().add_object(m).ok());
+    }
+    std::atomic<bool> done{false};
+    std::atomic<int> side_calls{0};
+    std::thread other([&] {
+        auto c2 = connect(daemon);
+        ASSERT_TRUE(c2);
+        while (!done.load()) {
+            auto r = c2->describe_scene(scene->scene_id);
+            ASSERT_TRUE(r.ok()) << r.status().to_string();
+            ++side_calls;
+        }
+    });
+    auto stream = c->open_stream(scene->scene_id);
+    ASSERT_TRUE(stream.ok());
+    struct Sent {
+        std::uint64_t frame;
+        std::optional<QueryResult> expected;  // for a query frame
+    };
+    std::vector<Sent> window;
+    std::uint64_t next = 1;
+    for (std::size_t k = 1; k <= 40; ++k) {
+        FrameRequest moves;
+        moves.frame = next++;
+        moves.update = sc.step(k, local.scene());
+        // In process, frame by frame as the daemon runs them (the engine's frame pipeline).
+        ASSERT_TRUE(proxima::run_frame(local, moves, nullptr, {}).ok());
+        ASSERT_TRUE(stream.value()->send(moves).ok());
+        window.push_back({moves.frame, std::nullopt});
+        if (k % 3 == 0) {
+            FrameRequest ask;
+            ask.frame = next++;
+            ask.queries = all_queries(0.01);
+            // One culler on both sides (automatic picks by measured times): the bowl's
+            // separations have ties, and each culler breaks them its own way.
+            ask.queries.culler = CullerKind::bvh;
+            auto expected = proxima::run_frame(local, ask, nullptr, {});
+            ASSERT_TRUE(expected.ok());
+            ASSERT_TRUE(stream.value()->send(ask).ok());
+            window.push_back({ask.frame, std::move(expected->result)});
+        }
+        if (window.size() >= 3 || k == 40) {
+            for (const auto& w : window) {
+                SCOPED_TRACE("frame " + std::to_string(w.frame));
+                auto got = stream.value()->receive();
+                ASSERT_TRUE(got.ok()) << got.status().to_string();
+                EXPECT_EQ(got->frame, w.frame);
+                EXPECT_EQ(got->object_ids, ids_of(local.scene()));
+                if (w.expected) {
+                    expect_same(got->result, *w.expected, false);
+                }
+            }
+            window.clear();
+        }
+    }
+    done = true;
+    other.join();
+    EXPECT_GT(side_calls.load(), 0);
+    EXPECT_TRUE(stream.value()->finish().ok());
+    // The scene ends where the last move left it.
+    FrameRequest last;
+    last.queries = all_queries(0.01);
+    last.queries.culler = CullerKind::bvh;
+    auto final_remote = c->query(scene->scene_id, last);
+    ASSERT_TRUE(final_remote.ok());
+    auto final_local = proxima::run_frame(local, last, nullptr, {});
+    ASSERT_TRUE(final_local.ok());
+    expect_same(final_remote->result, final_local->result, false);
 }
 
 // Waits until `parties` threads have arrived (each arrives once per phase), at most 10 s, so a

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <random>
 #include <tuple>
 #include <variant>
 
@@ -277,6 +278,65 @@ TEST(Wire, Float32RoundsEachCoordinateToNearest) {
         }
     }
     EXPECT_EQ(back->mesh.triangles, mesh.mesh.triangles);
+}
+
+// The float32 buffers are packed and widened with whole-float stores (a vectorized loop): the
+// bytes and values must be exactly those of one coordinate at a time, little-endian, for every
+// length (the loop's remainder) and for awkward values (ties, subnormals, overflow, -0, NaN).
+TEST(Wire, Float32BuffersMatchOneCoordinateAtATime) {
+    std::mt19937_64 rng(16);
+    std::vector<double> specials{0.0,
+                                 -0.0,
+                                 1.0 + std::ldexp(1.0, -24),  // a tie: rounds to even (1.0f)
+                                 1.0 + 3 * std::ldexp(1.0, -24),
+                                 std::ldexp(1.0, -140),  // a float subnormal
+                                 std::ldexp(1.0, -160),  // rounds to zero
+                                 3.5e38,                 // over FLT_MAX: +inf
+                                 -3.5e38,
+                                 std::numeric_limits<double>::infinity(),
+                                 std::numeric_limits<double>::quiet_NaN()};
+    for (const std::size_t n :
+         {std::size_t{0}, std::size_t{1}, std::size_t{3}, std::size_t{1001}}) {
+        std::vector<Vec3> v(n);
+        std::uniform_real_distribution<double> coord(-1e3, 1e3);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (int k = 0; k < 3; ++k) {
+                const std::size_t j = 3 * i + static_cast<std::size_t>(k);
+                v[i][k] = j < specials.size() ? specials[j] : coord(rng);
+            }
+        }
+        const auto packed = wire::pack_vertices(v, true);
+        ASSERT_EQ(packed.size(), 12 * n);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (int k = 0; k < 3; ++k) {
+                const auto want = std::bit_cast<std::uint32_t>(static_cast<float>(v[i][k]));
+                for (std::size_t b = 0; b < 4; ++b) {
+                    ASSERT_EQ(static_cast<unsigned char>(packed[12 * i + 4 * k + b]),
+                              (want >> (8 * b)) & 0xFFu)
+                        << n << " " << i << " " << k;
+                }
+            }
+        }
+        // Widening back: any 32-bit pattern, byte by byte.
+        std::string raw(12 * n, '\0');
+        for (auto& c : raw) {
+            c = static_cast<char>(rng() & 0xFFu);
+        }
+        auto decoded = wire::decode_vertex_bytes(v1::SCALAR_TYPE_FLOAT32, raw, "positions");
+        ASSERT_TRUE(decoded.ok());
+        ASSERT_EQ(decoded->size(), n);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (int k = 0; k < 3; ++k) {
+                std::uint32_t pattern = 0;
+                for (std::size_t b = 0; b < 4; ++b) {
+                    pattern |= std::uint32_t{static_cast<unsigned char>(raw[12 * i + 4 * k + b])}
+                               << (8 * b);
+                }
+                const double want = std::bit_cast<float>(pattern);
+                EXPECT_EQ(bits((*decoded)[i][k]), bits(want)) << n << " " << i << " " << k;
+            }
+        }
+    }
 }
 
 TEST(Wire, MalformedBuffersAreRejectedWithTheCulprit) {
