@@ -2,6 +2,7 @@
 // Subcommands that live in their own files. Each adds itself to the app; when it is the one
 // the user named, its callback runs it during parsing and stores the exit status in `exit_code`.
 
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -82,6 +83,20 @@ StatusOr<client::ConnectOptions> connect_options(const ServerFlags& flags,
 StatusOr<std::unique_ptr<client::Client>> connect_server(const std::string& address,
                                                          const ServerFlags& flags,
                                                          client::ConnectOptions base = {});
+// The region of a served massive model that `proxima region` fetches and `proxima snapshot
+// --model` draws (clients/cli/server_flags.cpp): --center X,Y,Z, --radius, --room and
+// --max-triangles.
+struct RegionFlags {
+    std::vector<double> center{0.0, 0.0, 0.0};
+    double radius = 0.0;
+    std::string room;
+    std::uint64_t max_triangles = 0;
+};
+// Adds the flags to `cmd`; with `model` set they need it and their help says so.
+void add_region_flags(CLI::App& cmd, RegionFlags& flags, CLI::Option* model = nullptr);
+// The request for `model`'s region from the flags (no `objects`, float32 vertices);
+// invalid_argument when --center is not three numbers.
+StatusOr<client::RegionRequest> region_request(const std::string& model, const RegionFlags& flags);
 // One frame on the daemon in a scene of its own (clients/cli/remote.cpp): creates the scene with
 // `objects` in input order (so result indices mean what they mean locally), lets `fill` complete
 // the frame (it sees the scene's object ids), sends it with the Query RPC, then deletes the
