@@ -1147,41 +1147,53 @@ TEST_F(MassiveRegion, FetchRegionShowsARoomsEdits) {
     fs::remove_all(*s_models / "other");
 }
 
-TEST_F(MassiveRegion, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
+// A region request both region calls must refuse: what it is, the request, the status and a part
+// of its message.
+struct BadRegion {
+    std::string what;
+    client::RegionRequest request;
+    StatusCode code;
+    std::string message;
+};
+
+// "plant" within 1.0 of the origin, then `change`d.
+template <typename Change>
+client::RegionRequest plant_region(Change change) {
+    client::RegionRequest r;
+    r.model = "plant";
+    r.radius = 1.0;
+    change(r);
+    return r;
+}
+
+// The bad requests FetchRegion and Snapshot with `model` refuse alike.
+std::vector<BadRegion> bad_regions() {
     const double nan = std::numeric_limits<double>::quiet_NaN();
+    return {
+        {"unknown model", plant_region([](auto& r) { r.model = "nope"; }), StatusCode::not_found,
+         "nope"},
+        {"negative radius", plant_region([](auto& r) { r.radius = -1.0; }),
+         StatusCode::invalid_argument, "radius"},
+        {"NaN radius", plant_region([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
+         "radius"},
+        {"NaN center", plant_region([&](auto& r) { r.center.y = nan; }),
+         StatusCode::invalid_argument, "center"},
+        {"unknown room", plant_region([](auto& r) { r.room = "nobody-here"; }),
+         StatusCode::not_found, "nobody-here"},
+    };
+}
+
+TEST_F(MassiveRegion, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
     const double inf = std::numeric_limits<double>::infinity();
-    struct Case {
-        std::string what;
-        client::RegionRequest request;
-        StatusCode code;
-        std::string message;  // a part of the error message
-    };
-    auto make = [](auto change) {
-        client::RegionRequest r;
-        r.model = "plant";
-        r.radius = 1.0;
-        change(r);
-        return r;
-    };
-    const std::vector<Case> cases = {
-        {"unknown model", make([](auto& r) { r.model = "nope"; }), StatusCode::not_found, "nope"},
-        {"negative radius", make([](auto& r) { r.radius = -1.0; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN radius", make([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
-         "radius"},
-        {"infinite radius", make([&](auto& r) { r.radius = inf; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN center", make([&](auto& r) { r.center.y = nan; }), StatusCode::invalid_argument,
-         "center"},
-        {"infinite center", make([&](auto& r) { r.center.z = -inf; }), StatusCode::invalid_argument,
-         "center"},
-        {"object out of range", make([](auto& r) {
-             r.objects = {1, 999};
-         }),
-         StatusCode::invalid_argument, "objects[1]: object 999"},
-        {"unknown room", make([](auto& r) { r.room = "nobody-here"; }), StatusCode::not_found,
-         "nobody-here"},
-    };
+    auto cases = bad_regions();
+    cases.push_back({"infinite radius", plant_region([&](auto& r) { r.radius = inf; }),
+                     StatusCode::invalid_argument, "radius"});
+    cases.push_back({"infinite center", plant_region([&](auto& r) { r.center.z = -inf; }),
+                     StatusCode::invalid_argument, "center"});
+    cases.push_back({"object out of range", plant_region([](auto& r) {
+                         r.objects = {1, 999};
+                     }),
+                     StatusCode::invalid_argument, "objects[1]: object 999"});
     for (const auto& k : cases) {
         SCOPED_TRACE(k.what);
         std::size_t events = 0;
@@ -1376,38 +1388,14 @@ TEST_F(MassiveRegion, SnapshotOfARegionRejectsBadRequests) {
     render::SnapshotRequest request;
     request.render.width = 8;
     request.render.height = 8;
-    struct Case {
-        std::string what;
-        client::RegionRequest region;
-        StatusCode code;
-        std::string message;
-    };
-    auto make = [](auto change) {
-        client::RegionRequest r;
-        r.model = "plant";
-        r.radius = 1.0;
-        change(r);
-        return r;
-    };
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    const std::vector<Case> cases = {
-        {"unknown model", make([](auto& r) { r.model = "nope"; }), StatusCode::not_found, "nope"},
-        {"negative radius", make([](auto& r) { r.radius = -1.0; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN radius", make([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN center", make([&](auto& r) { r.center.y = nan; }), StatusCode::invalid_argument,
-         "center"},
-        {"unknown room", make([](auto& r) { r.room = "nobody-here"; }), StatusCode::not_found,
-         "nobody-here"},
-        {"nothing near", make([](auto& r) {
-             r.center = {500, 500, 500};
-         }),
-         StatusCode::failed_precondition, "no piece"},
-    };
+    auto cases = bad_regions();
+    cases.push_back({"nothing near", plant_region([](auto& r) {
+                         r.center = {500, 500, 500};
+                     }),
+                     StatusCode::failed_precondition, "no piece"});
     for (const auto& k : cases) {
         SCOPED_TRACE(k.what);
-        auto got = m_client->snapshot_region(k.region, request);
+        auto got = m_client->snapshot_region(k.request, request);
         EXPECT_EQ(got.status().code(), k.code) << got.status().to_string();
         EXPECT_NE(got.status().message().find(k.message), std::string::npos)
             << got.status().to_string();
