@@ -74,6 +74,12 @@ struct ServerFlags {
 };
 // Adds the flags to `cmd`; with `server` set they need it (they mean nothing locally).
 void add_server_flags(CLI::App& cmd, ServerFlags& flags, CLI::Option* server = nullptr);
+// --local (in this process, the default) and --server HOST:PORT (on a daemon), which exclude
+// each other, then the server flags needing --server: for the commands that run either way, with
+// their own help texts. Returns --server, for the options that need it.
+CLI::Option* add_local_or_server(CLI::App& cmd, bool& local, std::string& server,
+                                 ServerFlags& flags, const std::string& local_help,
+                                 const std::string& server_help);
 // ConnectOptions from the flags: the token (from the file, else PROXIMA_TOKEN; a token file
 // readable by every user is a warning on standard error) and TLS when any --tls-* flag is given.
 // Errors name the flag's file.

@@ -33,6 +33,16 @@ void add_server_flags(CLI::App& cmd, ServerFlags& flags, CLI::Option* server) {
                                 "instead of the address's host (TLS)"));
 }
 
+CLI::Option* add_local_or_server(CLI::App& cmd, bool& local, std::string& server,
+                                 ServerFlags& flags, const std::string& local_help,
+                                 const std::string& server_help) {
+    auto* local_flag = cmd.add_flag("--local", local, local_help);
+    auto* server_opt = cmd.add_option("--server", server, server_help);
+    server_opt->excludes(local_flag);
+    add_server_flags(cmd, flags, server_opt);
+    return server_opt;
+}
+
 void add_region_flags(CLI::App& cmd, RegionFlags& flags, CLI::Option* model) {
     // With `model`: "With --model: " before the help, which then starts in lower case.
     auto help = [model](std::string text) {

@@ -219,12 +219,9 @@ void add_snapshot_command(CLI::App& app, int& exit_code) {
         "snapshot",
         "An offscreen PNG of mesh files: colliding triangles red, pairs within --tolerance amber, "
         "closest pairs as segments");
-    auto* local_flag =
-        cmd->add_flag("--local", args->local, "Render in this process (the default)");
-    auto* server_opt = cmd->add_option("--server", args->server,
-                                       "Render on the proximad daemon at HOST:PORT instead");
-    server_opt->excludes(local_flag);
-    add_server_flags(*cmd, args->server_flags, server_opt);
+    auto* server_opt = add_local_or_server(*cmd, args->local, args->server, args->server_flags,
+                                           "Render in this process (the default)",
+                                           "Render on the proximad daemon at HOST:PORT instead");
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
     cmd->add_flag("--weld", args->weld,
