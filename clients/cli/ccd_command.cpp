@@ -248,12 +248,9 @@ void add_ccd_command(CLI::App& app, int& exit_code) {
         "ccd",
         "Continuous collisions between two frames: every vertex moves linearly from T0_FILE to "
         "T1_FILE (same topology)");
-    auto* local_flag =
-        cmd->add_flag("--local", args->local, "Run the engine in this process (the default)");
-    auto* server_opt = cmd->add_option("--server", args->server,
-                                       "Run on the proximad daemon at HOST:PORT instead");
-    server_opt->excludes(local_flag);
-    add_server_flags(*cmd, args->server_flags, server_opt);
+    add_local_or_server(*cmd, args->local, args->server, args->server_flags,
+                        "Run the engine in this process (the default)",
+                        "Run on the proximad daemon at HOST:PORT instead");
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
     cmd->add_flag("--weld", args->weld,

@@ -2,6 +2,7 @@
 // Subcommands that live in their own files. Each adds itself to the app; when it is the one
 // the user named, its callback runs it during parsing and stores the exit status in `exit_code`.
 
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -73,6 +74,12 @@ struct ServerFlags {
 };
 // Adds the flags to `cmd`; with `server` set they need it (they mean nothing locally).
 void add_server_flags(CLI::App& cmd, ServerFlags& flags, CLI::Option* server = nullptr);
+// --local (in this process, the default) and --server HOST:PORT (on a daemon), which exclude
+// each other, then the server flags needing --server: for the commands that run either way, with
+// their own help texts. Returns --server, for the options that need it.
+CLI::Option* add_local_or_server(CLI::App& cmd, bool& local, std::string& server,
+                                 ServerFlags& flags, const std::string& local_help,
+                                 const std::string& server_help);
 // ConnectOptions from the flags: the token (from the file, else PROXIMA_TOKEN; a token file
 // readable by every user is a warning on standard error) and TLS when any --tls-* flag is given.
 // Errors name the flag's file.
@@ -82,6 +89,20 @@ StatusOr<client::ConnectOptions> connect_options(const ServerFlags& flags,
 StatusOr<std::unique_ptr<client::Client>> connect_server(const std::string& address,
                                                          const ServerFlags& flags,
                                                          client::ConnectOptions base = {});
+// The region of a served massive model that `proxima region` fetches and `proxima snapshot
+// --model` draws (clients/cli/server_flags.cpp): --center X,Y,Z, --radius, --room and
+// --max-triangles.
+struct RegionFlags {
+    std::vector<double> center{0.0, 0.0, 0.0};
+    double radius = 0.0;
+    std::string room;
+    std::uint64_t max_triangles = 0;
+};
+// Adds the flags to `cmd`; with `model` set they need it and their help says so.
+void add_region_flags(CLI::App& cmd, RegionFlags& flags, CLI::Option* model = nullptr);
+// The request for `model`'s region from the flags (no `objects`, float32 vertices);
+// invalid_argument when --center is not three numbers.
+StatusOr<client::RegionRequest> region_request(const std::string& model, const RegionFlags& flags);
 // One frame on the daemon in a scene of its own (clients/cli/remote.cpp): creates the scene with
 // `objects` in input order (so result indices mean what they mean locally), lets `fill` complete
 // the frame (it sees the scene's object ids), sends it with the Query RPC, then deletes the

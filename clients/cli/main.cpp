@@ -620,12 +620,10 @@ int main(int argc, char** argv) {
         DistanceArgs dist;
         auto* distance = app.add_subcommand(
             "distance", "Separation, self distance, collisions and tolerance on mesh files");
-        auto* local_flag = distance->add_flag("--local", dist.local,
-                                              "Run the engine in this process (the default)");
-        auto* server_opt = distance->add_option("--server", dist.server,
-                                                "Run on the proximad daemon at HOST:PORT instead");
-        server_opt->excludes(local_flag);
-        cli::add_server_flags(*distance, dist.server_flags, server_opt);
+        auto* server_opt =
+            cli::add_local_or_server(*distance, dist.local, dist.server, dist.server_flags,
+                                     "Run the engine in this process (the default)",
+                                     "Run on the proximad daemon at HOST:PORT instead");
         distance
             ->add_option("--inline-mesh-bytes", dist.inline_mesh_bytes,
                          "With --server: objects beyond this many bytes (in all) are uploaded "

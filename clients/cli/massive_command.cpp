@@ -926,11 +926,8 @@ struct RegionArgs {
     std::string server;
     ServerFlags server_flags;
     std::string model;
-    std::vector<double> center{0.0, 0.0, 0.0};
-    double radius = 0.0;
-    std::string room;
+    RegionFlags region;
     std::vector<std::uint32_t> objects;
-    std::uint64_t max_triangles = 0;
     bool float64 = false;
     std::string obj;
     JsonOutput output;
@@ -938,9 +935,12 @@ struct RegionArgs {
 };
 
 int run_region(const RegionArgs& args) {
-    if (args.center.size() != 3) {
-        return fail(invalid_argument("--center is three numbers X,Y,Z"));
+    auto request = region_request(args.model, args.region);
+    if (!request.ok()) {
+        return fail(request.status());
     }
+    request->objects = args.objects;
+    request->float64 = args.float64;
     std::FILE* obj = nullptr;
     if (!args.obj.empty()) {
         obj = std::fopen(args.obj.c_str(), "w");
@@ -948,7 +948,7 @@ int run_region(const RegionArgs& args) {
             return fail(Status(StatusCode::unavailable, "cannot write " + args.obj));
         }
         std::fprintf(obj, "# proxima region: model %s%s%s\n", args.model.c_str(),
-                     args.room.empty() ? "" : " room ", args.room.c_str());
+                     args.region.room.empty() ? "" : " room ", args.region.room.c_str());
     }
     auto c = connect(args.server, args.server_flags);
     if (!c.ok()) {
@@ -957,19 +957,11 @@ int run_region(const RegionArgs& args) {
         }
         return fail(c.status());
     }
-    client::RegionRequest request;
-    request.model = args.model;
-    request.center = {args.center[0], args.center[1], args.center[2]};
-    request.radius = args.radius;
-    request.room = args.room;
-    request.objects = args.objects;
-    request.max_triangles = args.max_triangles;
-    request.float64 = args.float64;
     client::ProgressPrinter printer(args.quiet);
     nlohmann::json pieces = nlohmann::json::array();
     unsigned long long next_vertex = 1;  // OBJ indices start at 1 and run over the whole file
     const auto start = Clock::now();
-    auto summary = c.value()->fetch_region(request, [&](const client::RegionEvent& e) {
+    auto summary = c.value()->fetch_region(*request, [&](const client::RegionEvent& e) {
         if (const auto* g = std::get_if<client::RegionProgress>(&e)) {
             printer.update({"fetching", g->triangles_sent, g->triangles_total, "triangles"});
             return true;
@@ -1013,10 +1005,10 @@ int run_region(const RegionArgs& args) {
     }
     nlohmann::json doc = {{"server", args.server},
                           {"model", args.model},
-                          {"room", args.room},
-                          {"center", args.center},
-                          {"radius", args.radius},
-                          {"max_triangles", args.max_triangles},
+                          {"room", args.region.room},
+                          {"center", args.region.center},
+                          {"radius", args.region.radius},
+                          {"max_triangles", args.region.max_triangles},
                           {"generation", summary->generation},
                           {"model_version", summary->model_version},
                           {"piece_count", summary->pieces},
@@ -1166,21 +1158,9 @@ void add_massive_commands(CLI::App& app, int& exit_code) {
     region->add_option("--server", region_args->server, "The daemon's HOST:PORT")->required();
     add_server_flags(*region, region_args->server_flags);
     region->add_option("--model", region_args->model, "The model's name")->required();
-    region->add_option("--center", region_args->center, "The point X,Y,Z (default 0,0,0)")
-        ->delimiter(',')
-        ->expected(3);
-    region
-        ->add_option("--radius", region_args->radius,
-                     "Pieces whose boxes come within this distance (0: every piece)")
-        ->check(non_negative_number())
-        ->capture_default_str();
-    region->add_option("--room", region_args->room, "A review room's edited view of the model");
+    add_region_flags(*region, region_args->region);
     region->add_option("--objects", region_args->objects, "Only these object indices (I,J,...)")
         ->delimiter(',');
-    region
-        ->add_option("--max-triangles", region_args->max_triangles,
-                     "Stop after the nearest pieces up to this many triangles (0: no limit)")
-        ->capture_default_str();
     region->add_flag("--float64", region_args->float64,
                      "Exact float64 coordinates (default: float32 on the wire)");
     region->add_option("--obj", region_args->obj,

@@ -360,12 +360,9 @@ void add_play_command(CLI::App& app, int& exit_code) {
                     "The sequence: a folder of numbered mesh files (frame_000.obj, "
                     "frame_001.obj, ...) or a Quake II MD2 model (its keyframes)")
         ->required();
-    auto* local_flag =
-        cmd->add_flag("--local", args->local, "Run the engine in this process (the default)");
-    auto* server_opt = cmd->add_option("--server", args->server,
-                                       "Stream the frames to the proximad daemon at HOST:PORT");
-    server_opt->excludes(local_flag);
-    add_server_flags(*cmd, args->server_flags, server_opt);
+    auto* server_opt = add_local_or_server(*cmd, args->local, args->server, args->server_flags,
+                                           "Run the engine in this process (the default)",
+                                           "Stream the frames to the proximad daemon at HOST:PORT");
     auto* fps = cmd->add_option("--fps", args->fps,
                                 "Send frames at this rate (default: the folder's sequence.json "
                                 "fps, else as fast as answered)")

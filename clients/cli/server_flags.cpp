@@ -1,6 +1,8 @@
 // The flags every --server subcommand shares: who the client is (a bearer token) and how the
-// connection is secured (TLS, optionally mutual). Declared in commands.hpp.
+// connection is secured (TLS, optionally mutual); and the region of a served massive model that
+// the model commands select. Declared in commands.hpp.
 
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 
@@ -29,6 +31,59 @@ void add_server_flags(CLI::App& cmd, ServerFlags& flags, CLI::Option* server) {
     needs_server(cmd.add_option("--tls-server-name", flags.tls_server_name,
                                 "With --server: the name the daemon's certificate must hold "
                                 "instead of the address's host (TLS)"));
+}
+
+CLI::Option* add_local_or_server(CLI::App& cmd, bool& local, std::string& server,
+                                 ServerFlags& flags, const std::string& local_help,
+                                 const std::string& server_help) {
+    auto* local_flag = cmd.add_flag("--local", local, local_help);
+    auto* server_opt = cmd.add_option("--server", server, server_help);
+    server_opt->excludes(local_flag);
+    add_server_flags(cmd, flags, server_opt);
+    return server_opt;
+}
+
+void add_region_flags(CLI::App& cmd, RegionFlags& flags, CLI::Option* model) {
+    // With `model`: "With --model: " before the help, which then starts in lower case.
+    auto help = [model](std::string text) {
+        if (model) {
+            text[0] = static_cast<char>(std::tolower(static_cast<unsigned char>(text[0])));
+            text = "With --model: " + text;
+        }
+        return text;
+    };
+    auto needs_model = [model](CLI::Option* option) {
+        if (model) {
+            option->needs(model);
+        }
+    };
+    needs_model(cmd.add_option("--center", flags.center, help("The point X,Y,Z (default 0,0,0)"))
+                    ->delimiter(',')
+                    ->expected(3));
+    needs_model(cmd.add_option("--radius", flags.radius,
+                               help("Pieces whose boxes come within this distance (0: every "
+                                    "piece)"))
+                    ->check(non_negative_number())
+                    ->capture_default_str());
+    needs_model(
+        cmd.add_option("--room", flags.room, help("A review room's edited view of the model")));
+    needs_model(cmd.add_option("--max-triangles", flags.max_triangles,
+                               help("Stop after the nearest pieces up to this many triangles (0: "
+                                    "no limit)"))
+                    ->capture_default_str());
+}
+
+StatusOr<client::RegionRequest> region_request(const std::string& model, const RegionFlags& flags) {
+    if (flags.center.size() != 3) {
+        return invalid_argument("--center is three numbers X,Y,Z");
+    }
+    client::RegionRequest request;
+    request.model = model;
+    request.center = {flags.center[0], flags.center[1], flags.center[2]};
+    request.radius = flags.radius;
+    request.room = flags.room;
+    request.max_triangles = flags.max_triangles;
+    return request;
 }
 
 StatusOr<client::ConnectOptions> connect_options(const ServerFlags& flags,

@@ -43,10 +43,7 @@ struct SnapshotArgs {
     std::vector<std::string> files;
     // A served massive model's region instead of files (--server only).
     std::string model;
-    std::vector<double> center{0.0, 0.0, 0.0};
-    double radius = 0.0;
-    std::string room;
-    std::uint64_t max_triangles = 0;
+    RegionFlags region;
 };
 
 // 6 or 9 comma-separated finite numbers: eye, target and optionally up.
@@ -124,17 +121,12 @@ StatusOr<render::Snapshot> snapshot_remote(const SnapshotArgs& args,
 }
 
 StatusOr<render::Snapshot> snapshot_model(const SnapshotArgs& args,
+                                          const client::RegionRequest& region,
                                           const render::SnapshotRequest& request) {
     auto c = connect_server(args.server, args.server_flags, client::ConnectOptions{});
     if (!c.ok()) {
         return c.status();
     }
-    client::RegionRequest region;
-    region.model = args.model;
-    region.center = {args.center[0], args.center[1], args.center[2]};
-    region.radius = args.radius;
-    region.room = args.room;
-    region.max_triangles = args.max_triangles;
     return (*c)->snapshot_region(region, request);
 }
 
@@ -163,6 +155,7 @@ int run_snapshot(const SnapshotArgs& args) {
     if (Status s = render::validate_snapshot_request(request); !s.ok()) {
         return fail(s);
     }
+    StatusOr<client::RegionRequest> region = client::RegionRequest{};
     if (!args.model.empty()) {
         if (args.server.empty()) {
             return fail(invalid_argument("--model: a model region needs --server ADDR"));
@@ -170,8 +163,9 @@ int run_snapshot(const SnapshotArgs& args) {
         if (!args.files.empty()) {
             return fail(invalid_argument("--model: give either mesh files or --model, not both"));
         }
-        if (args.center.size() != 3) {
-            return fail(invalid_argument("--center is three numbers X,Y,Z"));
+        region = region_request(args.model, args.region);
+        if (!region.ok()) {
+            return fail(region.status());
         }
     } else if (args.files.empty()) {
         return fail(invalid_argument("files: give mesh files (or --server ADDR --model NAME)"));
@@ -183,7 +177,7 @@ int run_snapshot(const SnapshotArgs& args) {
             return fail(objects.status());
         }
     }
-    auto snapshot = !args.model.empty()   ? snapshot_model(args, request)
+    auto snapshot = !args.model.empty()   ? snapshot_model(args, *region, request)
                     : args.server.empty() ? snapshot_local(*objects, request)
                                           : snapshot_remote(args, *objects, request);
     if (!snapshot.ok()) {
@@ -225,12 +219,9 @@ void add_snapshot_command(CLI::App& app, int& exit_code) {
         "snapshot",
         "An offscreen PNG of mesh files: colliding triangles red, pairs within --tolerance amber, "
         "closest pairs as segments");
-    auto* local_flag =
-        cmd->add_flag("--local", args->local, "Render in this process (the default)");
-    auto* server_opt = cmd->add_option("--server", args->server,
-                                       "Render on the proximad daemon at HOST:PORT instead");
-    server_opt->excludes(local_flag);
-    add_server_flags(*cmd, args->server_flags, server_opt);
+    auto* server_opt = add_local_or_server(*cmd, args->local, args->server, args->server_flags,
+                                           "Render in this process (the default)",
+                                           "Render on the proximad daemon at HOST:PORT instead");
     cmd->add_flag("--split-components", args->split_components,
                   "Make each connected component of a file an object");
     cmd->add_flag("--weld", args->weld,
@@ -259,20 +250,7 @@ void add_snapshot_command(CLI::App& app, int& exit_code) {
                                       "Instead of files: a region of this massive model served "
                                       "by --server (as `proxima region` selects it)");
     model_opt->needs(server_opt);
-    cmd->add_option("--center", args->center, "With --model: the region's centre X,Y,Z")
-        ->delimiter(',')
-        ->expected(3)
-        ->needs(model_opt);
-    cmd->add_option("--radius", args->radius,
-                    "With --model: pieces whose boxes come within this distance (0: every piece)")
-        ->check(non_negative_number())
-        ->needs(model_opt);
-    cmd->add_option("--room", args->room, "With --model: a review room's edited view")
-        ->needs(model_opt);
-    cmd->add_option("--max-triangles", args->max_triangles,
-                    "With --model: only the nearest pieces up to this many triangles (0: the "
-                    "daemon's limit)")
-        ->needs(model_opt);
+    add_region_flags(*cmd, args->region, model_opt);
     cmd->callback([args, &exit_code] { exit_code = run_snapshot(*args); });
 }
 

@@ -700,37 +700,36 @@ StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRe
     return detail::decode_frame_response(result);
 }
 
-StatusOr<render::Snapshot> Client::snapshot(const std::string& scene_id,
-                                            const render::SnapshotRequest& request) {
-    pb::SnapshotRequest message;
-    wire::encode_snapshot_request(scene_id, request, &message);
+namespace {
+
+// One Snapshot call, for a scene's or a model region's request.
+StatusOr<render::Snapshot> snapshot_call(Client::Impl* impl, const pb::SnapshotRequest& message) {
     pb::SnapshotResponse response;
     // Snapshots change nothing: safe to repeat.
-    if (auto st = m_impl->unary("Snapshot", Retry::idempotent,
-                                [&](grpc::ClientContext& context) {
-                                    return m_impl->stub_now()->Snapshot(&context, message,
-                                                                        &response);
-                                });
+    if (auto st = impl->unary("Snapshot", Retry::idempotent,
+                              [&](grpc::ClientContext& context) {
+                                  return impl->stub_now()->Snapshot(&context, message, &response);
+                              });
         !st.ok()) {
         return st;
     }
     return wire::decode_snapshot(response);
 }
 
+}  // namespace
+
+StatusOr<render::Snapshot> Client::snapshot(const std::string& scene_id,
+                                            const render::SnapshotRequest& request) {
+    pb::SnapshotRequest message;
+    wire::encode_snapshot_request(scene_id, request, &message);
+    return snapshot_call(m_impl.get(), message);
+}
+
 StatusOr<render::Snapshot> Client::snapshot_region(const massive::RegionRequest& region,
                                                    const render::SnapshotRequest& request) {
     pb::SnapshotRequest message;
     wire::encode_model_snapshot_request(region, request, &message);
-    pb::SnapshotResponse response;
-    if (auto st = m_impl->unary("Snapshot", Retry::idempotent,
-                                [&](grpc::ClientContext& context) {
-                                    return m_impl->stub_now()->Snapshot(&context, message,
-                                                                        &response);
-                                });
-        !st.ok()) {
-        return st;
-    }
-    return wire::decode_snapshot(response);
+    return snapshot_call(m_impl.get(), message);
 }
 
 StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& scene_id) {

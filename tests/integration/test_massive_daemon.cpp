@@ -30,6 +30,7 @@
 #include "proxima/massive/region.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/massive/verify.hpp"
+#include "support/model_stores.hpp"
 #include "wire.hpp"
 
 namespace proxima::test {
@@ -42,16 +43,6 @@ using client::ReviewEvent;
 
 constexpr std::uint64_t CACHE_BYTES = 48 * 1024;     // a few pieces at a time: evictions
 constexpr std::uint64_t MAX_PIECE_BYTES = 6 * 1024;  // cylinders split into several pieces
-
-TriangleMesh box_mesh(Vec3 lo, Vec3 hi) {
-    TriangleMesh m;
-    for (int k = 0; k < 8; ++k) {
-        m.vertices.push_back({k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z});
-    }
-    m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                   {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-    return m;
-}
 
 // A closed cylinder of radius r from `base` along +z (axis 2) or +x (axis 0), n segments.
 TriangleMesh cylinder_mesh(Vec3 base, double r, double length, int n, int axis = 2) {
@@ -131,14 +122,7 @@ void write_store(const fs::path& dir) {
     options.max_piece_bytes = MAX_PIECE_BYTES;
     options.chunk_bytes = 4096;
     options.source = "test_massive_daemon";
-    auto writer = massive::StoreWriter::create(dir.string(), options);
-    ASSERT_TRUE(writer.ok()) << writer.status().to_string();
-    for (auto& o : model_objects()) {
-        ASSERT_TRUE((*writer)->add(std::move(o)).ok());
-    }
-    auto summary = (*writer)->commit();
-    ASSERT_TRUE(summary.ok()) << summary.status().to_string();
-    ASSERT_GT(summary->split_objects, 0u) << "the test wants objects split into pieces";
+    write_model_store(dir.string(), model_objects(), options);
 }
 
 class MassiveDaemon : public ::testing::Test {
@@ -845,6 +829,24 @@ TEST_F(MassiveDaemon, RestartServesTheSameGenerationWithoutReimport) {
     EXPECT_EQ(open_local()->summary().generation, generation);
 }
 
+// The region calls' tests (FetchRegion, Snapshot with `model`): a daemon serving the models, a
+// client on it and the "plant" store opened in this process.
+class MassiveRegion : public MassiveDaemon {
+  protected:
+    void SetUp() override {
+        m_daemon = std::make_unique<DaemonProcess>(daemon_args(*s_models));
+        ASSERT_TRUE(m_daemon->ok()) << m_daemon->error();
+        m_client = connect(*m_daemon);
+        ASSERT_TRUE(m_client);
+        m_store = open_local();
+        ASSERT_TRUE(m_store);
+    }
+
+    std::unique_ptr<DaemonProcess> m_daemon;
+    std::unique_ptr<Client> m_client;
+    std::shared_ptr<const massive::Store> m_store;
+};
+
 // --- FetchRegion ---------------------------------------------------------------------------
 
 struct FetchedRegion {
@@ -912,22 +914,16 @@ void expect_object_triangles(const RegionTriangles& got, std::uint32_t object,
     }
 }
 
-TEST_F(MassiveDaemon, FetchRegionWholeModelEqualsTheStore) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
-    auto store = open_local();
-    ASSERT_TRUE(store);
+TEST_F(MassiveRegion, FetchRegionWholeModelEqualsTheStore) {
     for (const bool float64 : {true, false}) {
         SCOPED_TRACE(float64 ? "float64" : "float32");
         client::RegionRequest request;
         request.model = "plant";
         request.center = {3, 3, 0};  // ignored with radius 0
         request.float64 = float64;
-        auto region = fetch_all(*c, request);
+        auto region = fetch_all(*m_client, request);
         ASSERT_TRUE(region.ok()) << region.status().to_string();
-        const auto& s = store->summary();
+        const auto& s = m_store->summary();
         EXPECT_EQ(region->pieces.size(), s.pieces);
         EXPECT_EQ(region->summary.pieces, s.pieces);
         EXPECT_EQ(region->summary.triangles, s.triangles);
@@ -941,7 +937,7 @@ TEST_F(MassiveDaemon, FetchRegionWholeModelEqualsTheStore) {
         for (std::size_t k = 0; k < region->pieces.size(); ++k) {
             const auto& p = region->pieces[k];
             EXPECT_EQ(p.distance, 0.0);
-            EXPECT_EQ(p.object_name, store->objects()[p.object].name);
+            EXPECT_EQ(p.object_name, m_store->objects()[p.object].name);
             if (k > 0) {
                 EXPECT_LE(region->pieces[k - 1].object, p.object);
             }
@@ -949,22 +945,16 @@ TEST_F(MassiveDaemon, FetchRegionWholeModelEqualsTheStore) {
         // The union is the store's triangles exactly: every id once, every corner bit for bit.
         const auto got = region_triangles(region->pieces);
         EXPECT_EQ(got.size(), s.triangles);
-        for (std::uint32_t o = 0; o < store->objects().size(); ++o) {
-            auto stored = massive::read_object(*store, o);
+        for (std::uint32_t o = 0; o < m_store->objects().size(); ++o) {
+            auto stored = massive::read_object(*m_store, o);
             ASSERT_TRUE(stored.ok()) << stored.status().to_string();
             expect_object_triangles(got, o, stored.value(), massive::Affine{}, !float64);
         }
     }
 }
 
-TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
-    auto store = open_local();
-    ASSERT_TRUE(store);
-    const auto& pieces = store->pieces();
+TEST_F(MassiveRegion, FetchRegionNearestFirstWithinTheRadius) {
+    const auto& pieces = m_store->pieces();
     for (const double radius : {0.75, 2.5, 4.0}) {
         SCOPED_TRACE("radius " + std::to_string(radius));
         client::RegionRequest request;
@@ -972,7 +962,7 @@ TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
         request.center = {5.2, 5.5, 0.5};
         request.radius = radius;
         request.float64 = true;
-        auto region = fetch_all(*c, request);
+        auto region = fetch_all(*m_client, request);
         ASSERT_TRUE(region.ok()) << region.status().to_string();
         // The reference: every stored piece whose box is within the radius, by distance, object,
         // piece.
@@ -996,7 +986,7 @@ TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
             EXPECT_EQ(got.box.lo, pieces[p].box.lo);
             EXPECT_EQ(got.box.hi, pieces[p].box.hi);
             // The piece itself: the store's geometry with its object triangle ids.
-            auto local = store->read_piece(p);
+            auto local = m_store->read_piece(p);
             ASSERT_TRUE(local.ok());
             EXPECT_EQ(got.triangle_ids, local->source_triangles);
             EXPECT_EQ(got.vertices, local->vertices);
@@ -1009,14 +999,14 @@ TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
     }
 
     // Only some objects: the pipe (crossing row 2) and one cylinder, whole.
-    const auto pipe = static_cast<std::uint32_t>(store->objects().size() - 1);
+    const auto pipe = static_cast<std::uint32_t>(m_store->objects().size() - 1);
     client::RegionRequest only;
     only.model = "plant";
     only.objects = {pipe, 7};
-    auto region = fetch_all(*c, only);
+    auto region = fetch_all(*m_client, only);
     ASSERT_TRUE(region.ok()) << region.status().to_string();
     EXPECT_EQ(region->summary.triangles,
-              store->objects()[pipe].triangle_count + store->objects()[7].triangle_count);
+              m_store->objects()[pipe].triangle_count + m_store->objects()[7].triangle_count);
     for (const auto& p : region->pieces) {
         EXPECT_TRUE(p.object == pipe || p.object == 7) << p.object;
     }
@@ -1027,16 +1017,16 @@ TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
     capped.model = "plant";
     capped.center = {0.5, 0.5, 0.5};
     capped.radius = 100.0;
-    auto all = fetch_all(*c, capped);
+    auto all = fetch_all(*m_client, capped);
     ASSERT_TRUE(all.ok()) << all.status().to_string();
-    ASSERT_EQ(all->pieces.size(), store->summary().pieces);
+    ASSERT_EQ(all->pieces.size(), m_store->summary().pieces);
     EXPECT_EQ(all->pieces.front().object, 0u);  // the centre is inside object 0
     std::uint64_t first_three = 0;
     for (std::size_t k = 0; k < 3; ++k) {
         first_three += all->pieces[k].triangles.size();
     }
     capped.max_triangles = first_three + all->pieces[3].triangles.size() - 1;
-    auto cut = fetch_all(*c, capped);
+    auto cut = fetch_all(*m_client, capped);
     ASSERT_TRUE(cut.ok()) << cut.status().to_string();
     ASSERT_EQ(cut->pieces.size(), 3u);
     EXPECT_TRUE(cut->summary.truncated);
@@ -1045,23 +1035,17 @@ TEST_F(MassiveDaemon, FetchRegionNearestFirstWithinTheRadius) {
         EXPECT_EQ(cut->pieces[k].triangle_ids, all->pieces[k].triangle_ids);
         EXPECT_EQ(cut->pieces[k].object, all->pieces[k].object);
     }
-    capped.max_triangles = store->summary().triangles;
-    auto exact = fetch_all(*c, capped);
+    capped.max_triangles = m_store->summary().triangles;
+    auto exact = fetch_all(*m_client, capped);
     ASSERT_TRUE(exact.ok());
     EXPECT_FALSE(exact->summary.truncated);
-    EXPECT_EQ(exact->summary.pieces, store->summary().pieces);
+    EXPECT_EQ(exact->summary.pieces, m_store->summary().pieces);
 }
 
-TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
-    write_store(*s_models / "other");
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
-    auto store = open_local();
-    ASSERT_TRUE(store);
+TEST_F(MassiveRegion, FetchRegionShowsARoomsEdits) {
+    write_store(*s_models / "other");  // found by the daemon's rescan when it is named
     const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
-    auto alice = c->join_review({"region-room", "plant", "alice", avatar, 0.0, true});
+    auto alice = m_client->join_review({"region-room", "plant", "alice", avatar, 0.0, true});
     ASSERT_TRUE(alice.ok()) << alice.status().to_string();
     auto& session = *alice.value();
     auto edit = [&](std::uint64_t sequence) -> client::ReviewEditApplied {
@@ -1089,21 +1073,21 @@ TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
     const NamedMesh crate{"crate", box_mesh({24.9, 2.4, 0.4}, {25.6, 3.0, 1.0})};
     ASSERT_TRUE(session.add_object(3, crate).ok());
     const auto added = edit(3);
-    ASSERT_EQ(added.object, store->objects().size());
+    ASSERT_EQ(added.object, m_store->objects().size());
     EXPECT_EQ(added.transform.m, massive::Affine{}.m);  // only moves carry one
 
     client::RegionRequest request;
     request.model = "plant";
     request.room = "region-room";
     request.float64 = true;
-    auto region = fetch_all(*c, request);
+    auto region = fetch_all(*m_client, request);
     ASSERT_TRUE(region.ok()) << region.status().to_string();
     EXPECT_EQ(region->summary.model_version, 3u);
     const auto got = region_triangles(region->pieces);
     std::uint64_t want_triangles = 0;
-    for (std::uint32_t o = 0; o < store->objects().size(); ++o) {
+    for (std::uint32_t o = 0; o < m_store->objects().size(); ++o) {
         SCOPED_TRACE("object " + std::to_string(o));
-        auto stored = massive::read_object(*store, o);
+        auto stored = massive::read_object(*m_store, o);
         ASSERT_TRUE(stored.ok());
         if (o == 0) {
             EXPECT_EQ(got.count({0u, 0u}), 0u);  // deleted
@@ -1127,7 +1111,7 @@ TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
     request.objects = {added.object};
     request.center = {25.0, 2.5, 0.5};
     request.radius = 1.0;
-    auto just = fetch_all(*c, request);
+    auto just = fetch_all(*m_client, request);
     ASSERT_TRUE(just.ok()) << just.status().to_string();
     ASSERT_EQ(just->pieces.size(), 1u);
     EXPECT_EQ(just->pieces[0].object, added.object);
@@ -1135,13 +1119,13 @@ TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
     request.objects = {};
     request.center = {31.5, -1.5, 2.5};  // inside the moved cylinder's box
     request.radius = 0.1;
-    auto near_moved = fetch_all(*c, request);
+    auto near_moved = fetch_all(*m_client, request);
     ASSERT_TRUE(near_moved.ok()) << near_moved.status().to_string();
     ASSERT_EQ(near_moved->pieces.size(), 1u);
     EXPECT_EQ(near_moved->pieces[0].object, 7u);
     // Without the room: the stored model, unedited.
     request.room.clear();
-    auto stored_view = fetch_all(*c, request);
+    auto stored_view = fetch_all(*m_client, request);
     ASSERT_TRUE(stored_view.ok());
     EXPECT_TRUE(stored_view->pieces.empty());
     EXPECT_EQ(stored_view->summary.model_version, 0u);
@@ -1149,63 +1133,71 @@ TEST_F(MassiveDaemon, FetchRegionShowsARoomsEdits) {
     // A room on another model, an unknown room, an object the room does not have.
     request.model = "other";
     request.room = "region-room";
-    auto wrong = fetch_all(*c, request);
+    auto wrong = fetch_all(*m_client, request);
     EXPECT_EQ(wrong.status().code(), StatusCode::failed_precondition) << wrong.status().to_string();
     request.model = "plant";
     request.room = "no-such-room";
-    auto unknown = fetch_all(*c, request);
+    auto unknown = fetch_all(*m_client, request);
     EXPECT_EQ(unknown.status().code(), StatusCode::not_found) << unknown.status().to_string();
     request.room = "region-room";
     request.objects = {added.object + 1};
-    auto beyond = fetch_all(*c, request);
+    auto beyond = fetch_all(*m_client, request);
     EXPECT_EQ(beyond.status().code(), StatusCode::invalid_argument) << beyond.status().to_string();
     session.cancel();
     fs::remove_all(*s_models / "other");
 }
 
-TEST_F(MassiveDaemon, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
+// A region request both region calls must refuse: what it is, the request, the status and a part
+// of its message.
+struct BadRegion {
+    std::string what;
+    client::RegionRequest request;
+    StatusCode code;
+    std::string message;
+};
+
+// "plant" within 1.0 of the origin, then `change`d.
+template <typename Change>
+client::RegionRequest plant_region(Change change) {
+    client::RegionRequest r;
+    r.model = "plant";
+    r.radius = 1.0;
+    change(r);
+    return r;
+}
+
+// The bad requests FetchRegion and Snapshot with `model` refuse alike.
+std::vector<BadRegion> bad_regions() {
     const double nan = std::numeric_limits<double>::quiet_NaN();
+    return {
+        {"unknown model", plant_region([](auto& r) { r.model = "nope"; }), StatusCode::not_found,
+         "nope"},
+        {"negative radius", plant_region([](auto& r) { r.radius = -1.0; }),
+         StatusCode::invalid_argument, "radius"},
+        {"NaN radius", plant_region([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
+         "radius"},
+        {"NaN center", plant_region([&](auto& r) { r.center.y = nan; }),
+         StatusCode::invalid_argument, "center"},
+        {"unknown room", plant_region([](auto& r) { r.room = "nobody-here"; }),
+         StatusCode::not_found, "nobody-here"},
+    };
+}
+
+TEST_F(MassiveRegion, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
     const double inf = std::numeric_limits<double>::infinity();
-    struct Case {
-        std::string what;
-        client::RegionRequest request;
-        StatusCode code;
-        std::string message;  // a part of the error message
-    };
-    auto make = [](auto change) {
-        client::RegionRequest r;
-        r.model = "plant";
-        r.radius = 1.0;
-        change(r);
-        return r;
-    };
-    const std::vector<Case> cases = {
-        {"unknown model", make([](auto& r) { r.model = "nope"; }), StatusCode::not_found, "nope"},
-        {"negative radius", make([](auto& r) { r.radius = -1.0; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN radius", make([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
-         "radius"},
-        {"infinite radius", make([&](auto& r) { r.radius = inf; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN center", make([&](auto& r) { r.center.y = nan; }), StatusCode::invalid_argument,
-         "center"},
-        {"infinite center", make([&](auto& r) { r.center.z = -inf; }), StatusCode::invalid_argument,
-         "center"},
-        {"object out of range", make([](auto& r) {
-             r.objects = {1, 999};
-         }),
-         StatusCode::invalid_argument, "objects[1]: object 999"},
-        {"unknown room", make([](auto& r) { r.room = "nobody-here"; }), StatusCode::not_found,
-         "nobody-here"},
-    };
+    auto cases = bad_regions();
+    cases.push_back({"infinite radius", plant_region([&](auto& r) { r.radius = inf; }),
+                     StatusCode::invalid_argument, "radius"});
+    cases.push_back({"infinite center", plant_region([&](auto& r) { r.center.z = -inf; }),
+                     StatusCode::invalid_argument, "center"});
+    cases.push_back({"object out of range", plant_region([](auto& r) {
+                         r.objects = {1, 999};
+                     }),
+                     StatusCode::invalid_argument, "objects[1]: object 999"});
     for (const auto& k : cases) {
         SCOPED_TRACE(k.what);
         std::size_t events = 0;
-        auto got = c->fetch_region(k.request, [&](const client::RegionEvent&) {
+        auto got = m_client->fetch_region(k.request, [&](const client::RegionEvent&) {
             ++events;
             return true;
         });
@@ -1215,7 +1207,7 @@ TEST_F(MassiveDaemon, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
         EXPECT_EQ(events, 0u);
     }
     // An unknown scalar type: the generated stub, since the library never sends one.
-    auto stub = make_stub(daemon.address());
+    auto stub = make_stub(m_daemon->address());
     grpc::ClientContext context;
     deadline_in(context, 10s);
     v1::FetchRegionRequest raw;
@@ -1229,15 +1221,11 @@ TEST_F(MassiveDaemon, FetchRegionRejectsBadRequestsBeforeSendingAnything) {
     EXPECT_NE(status.error_message().find("type"), std::string::npos) << status.error_message();
 }
 
-TEST_F(MassiveDaemon, FetchRegionStopsOnCancelAndDeadline) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
+TEST_F(MassiveRegion, FetchRegionStopsOnCancelAndDeadline) {
     client::RegionRequest request;
     request.model = "plant";
     std::size_t pieces = 0;
-    auto cancelled = c->fetch_region(request, [&](const client::RegionEvent& e) {
+    auto cancelled = m_client->fetch_region(request, [&](const client::RegionEvent& e) {
         pieces += std::holds_alternative<client::RegionPiece>(e) ? 1 : 0;
         return false;
     });
@@ -1245,7 +1233,7 @@ TEST_F(MassiveDaemon, FetchRegionStopsOnCancelAndDeadline) {
     EXPECT_EQ(pieces, 1u);
     // A reader slower than its deadline: DEADLINE_EXCEEDED, not the whole model.
     pieces = 0;
-    auto late = c->fetch_region(
+    auto late = m_client->fetch_region(
         request,
         [&](const client::RegionEvent& e) {
             if (std::holds_alternative<client::RegionPiece>(e)) {
@@ -1256,22 +1244,16 @@ TEST_F(MassiveDaemon, FetchRegionStopsOnCancelAndDeadline) {
         },
         500ms);
     EXPECT_EQ(late.status().code(), StatusCode::deadline_exceeded) << late.status().to_string();
-    auto store = open_local();
-    ASSERT_TRUE(store);
-    EXPECT_LT(pieces, store->summary().pieces);
+    EXPECT_LT(pieces, m_store->summary().pieces);
     // The daemon serves on.
-    auto again = c->fetch_region(request);
+    auto again = m_client->fetch_region(request);
     ASSERT_TRUE(again.ok()) << again.status().to_string();
-    EXPECT_EQ(again->pieces, store->summary().pieces);
+    EXPECT_EQ(again->pieces, m_store->summary().pieces);
 }
 
-TEST_F(MassiveDaemon, FetchRegionStalledReaderDoesNotHoldUpOthers) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto store = open_local();
-    ASSERT_TRUE(store);
+TEST_F(MassiveRegion, FetchRegionStalledReaderDoesNotHoldUpOthers) {
     // A reader that takes one event and stops: the daemon waits for it (bounded), nothing else.
-    auto stub = make_stub(daemon.address());
+    auto stub = make_stub(m_daemon->address());
     grpc::ClientContext stalled;
     deadline_in(stalled, 30s);
     v1::FetchRegionRequest request;
@@ -1282,14 +1264,12 @@ TEST_F(MassiveDaemon, FetchRegionStalledReaderDoesNotHoldUpOthers) {
     ASSERT_TRUE(reader->Read(&first));
     EXPECT_TRUE(first.has_piece());
     // Meanwhile other calls are answered in full.
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
     for (int k = 0; k < 3; ++k) {
-        auto other = c->fetch_region({"plant"});
+        auto other = m_client->fetch_region({"plant"});
         ASSERT_TRUE(other.ok()) << other.status().to_string();
-        EXPECT_EQ(other->pieces, store->summary().pieces);
+        EXPECT_EQ(other->pieces, m_store->summary().pieces);
     }
-    auto list = c->list_models();
+    auto list = m_client->list_models();
     ASSERT_TRUE(list.ok()) << list.status().to_string();
     stalled.TryCancel();
     while (reader->Read(&first)) {
@@ -1316,11 +1296,7 @@ std::pair<int, int> project(const render::Camera& camera, const Vec3& p, int wid
 
 // Row 0's cells 0 ([0,1]^3) and 1 ([1,2]x[0,1]x[0,1]) touch along x = 1: every triangle of cell
 // 0's top face has a vertex on cell 1, so that face is red; the fitted camera sees it from above.
-TEST_F(MassiveDaemon, SnapshotOfARegionColoursItsTouchingPair) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
+TEST_F(MassiveRegion, SnapshotOfARegionColoursItsTouchingPair) {
     client::RegionRequest region;
     region.model = "plant";
     region.center = {0.5, 0.5, 0.5};
@@ -1329,7 +1305,7 @@ TEST_F(MassiveDaemon, SnapshotOfARegionColoursItsTouchingPair) {
     request.render.width = 160;
     request.render.height = 120;
     request.segments = false;
-    auto shot = c->snapshot_region(region, request);
+    auto shot = m_client->snapshot_region(region, request);
     if (shot.status().code() == StatusCode::unavailable && std::getenv("CI") == nullptr) {
         GTEST_SKIP() << "no EGL context here: " << shot.status().to_string();
     }
@@ -1340,7 +1316,7 @@ TEST_F(MassiveDaemon, SnapshotOfARegionColoursItsTouchingPair) {
     EXPECT_FALSE(shot->region->truncated);
     EXPECT_GT(shot->collision_count, 0u);
     // The same pieces FetchRegion sends for the same fields.
-    auto fetched = c->fetch_region(region);
+    auto fetched = m_client->fetch_region(region);
     ASSERT_TRUE(fetched.ok()) << fetched.status().to_string();
     EXPECT_EQ(shot->region->pieces, fetched->pieces);
     EXPECT_EQ(shot->region->triangles, fetched->triangles);
@@ -1361,13 +1337,9 @@ TEST_F(MassiveDaemon, SnapshotOfARegionColoursItsTouchingPair) {
 
 // With `room`: the room's view. Deleting cell 0 leaves cell 1 alone in the region: nothing
 // touches, and the pixel above cell 0's top face shows the background instead of red.
-TEST_F(MassiveDaemon, SnapshotOfARegionShowsARoomsEdits) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
+TEST_F(MassiveRegion, SnapshotOfARegionShowsARoomsEdits) {
     const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
-    auto alice = c->join_review({"snapshot-room", "plant", "alice", avatar, 0.0, true});
+    auto alice = m_client->join_review({"snapshot-room", "plant", "alice", avatar, 0.0, true});
     ASSERT_TRUE(alice.ok()) << alice.status().to_string();
     auto& session = *alice.value();
     ASSERT_TRUE(session.delete_object(1, 0).ok());
@@ -1388,7 +1360,7 @@ TEST_F(MassiveDaemon, SnapshotOfARegionShowsARoomsEdits) {
     request.render.height = 41;
     request.segments = false;
     request.render.camera = render::Camera{{0.5, 0.5, 10}, {0.5, 0.5, 0}, {0, 1, 0}, 20};
-    auto stored = c->snapshot_region(region, request);
+    auto stored = m_client->snapshot_region(region, request);
     if (stored.status().code() == StatusCode::unavailable && std::getenv("CI") == nullptr) {
         GTEST_SKIP() << "no EGL context here: " << stored.status().to_string();
     }
@@ -1402,7 +1374,7 @@ TEST_F(MassiveDaemon, SnapshotOfARegionShowsARoomsEdits) {
         << int(top.r) << "," << int(top.g) << "," << int(top.b);
 
     region.room = "snapshot-room";
-    auto edited = c->snapshot_region(region, request);
+    auto edited = m_client->snapshot_region(region, request);
     ASSERT_TRUE(edited.ok()) << edited.status().to_string();
     EXPECT_EQ(edited->region->objects, 1u);
     EXPECT_EQ(edited->region->model_version, 1u);
@@ -1412,53 +1384,25 @@ TEST_F(MassiveDaemon, SnapshotOfARegionShowsARoomsEdits) {
     EXPECT_EQ(image->at(20, 20), render::DEFAULT_BACKGROUND);
 }
 
-TEST_F(MassiveDaemon, SnapshotOfARegionRejectsBadRequests) {
-    DaemonProcess daemon(daemon_args(*s_models));
-    ASSERT_TRUE(daemon.ok()) << daemon.error();
-    auto c = connect(daemon);
-    ASSERT_TRUE(c);
+TEST_F(MassiveRegion, SnapshotOfARegionRejectsBadRequests) {
     render::SnapshotRequest request;
     request.render.width = 8;
     request.render.height = 8;
-    struct Case {
-        std::string what;
-        client::RegionRequest region;
-        StatusCode code;
-        std::string message;
-    };
-    auto make = [](auto change) {
-        client::RegionRequest r;
-        r.model = "plant";
-        r.radius = 1.0;
-        change(r);
-        return r;
-    };
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    const std::vector<Case> cases = {
-        {"unknown model", make([](auto& r) { r.model = "nope"; }), StatusCode::not_found, "nope"},
-        {"negative radius", make([](auto& r) { r.radius = -1.0; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN radius", make([&](auto& r) { r.radius = nan; }), StatusCode::invalid_argument,
-         "radius"},
-        {"NaN center", make([&](auto& r) { r.center.y = nan; }), StatusCode::invalid_argument,
-         "center"},
-        {"unknown room", make([](auto& r) { r.room = "nobody-here"; }), StatusCode::not_found,
-         "nobody-here"},
-        {"nothing near", make([](auto& r) {
-             r.center = {500, 500, 500};
-         }),
-         StatusCode::failed_precondition, "no piece"},
-    };
+    auto cases = bad_regions();
+    cases.push_back({"nothing near", plant_region([](auto& r) {
+                         r.center = {500, 500, 500};
+                     }),
+                     StatusCode::failed_precondition, "no piece"});
     for (const auto& k : cases) {
         SCOPED_TRACE(k.what);
-        auto got = c->snapshot_region(k.region, request);
+        auto got = m_client->snapshot_region(k.request, request);
         EXPECT_EQ(got.status().code(), k.code) << got.status().to_string();
         EXPECT_NE(got.status().message().find(k.message), std::string::npos)
             << got.status().to_string();
     }
     // Exactly one of scene_id and model: the generated stub, since the library never sends
     // anything else.
-    auto stub = make_stub(daemon.address());
+    auto stub = make_stub(m_daemon->address());
     const auto call = [&](const v1::SnapshotRequest& raw) {
         grpc::ClientContext context;
         deadline_in(context, 10s);

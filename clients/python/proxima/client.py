@@ -31,6 +31,32 @@ def _call(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         raise ProximaError.from_rpc(e) from None
 
 
+# A snapshot's camera: (eye, target, up or None, vertical fov in degrees).
+_Camera = Optional[Tuple[ArrayLike, ArrayLike, Optional[ArrayLike], float]]
+
+
+def _vec3(v: ArrayLike) -> Any:
+    return pb.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def _snapshot_request(width: int, height: int, camera: _Camera, collisions: bool,
+                      tolerance: Optional[float], separation: bool, **target: Any) -> Any:
+    """A SnapshotRequest for `target` (scene_id=..., or model=... and its region fields) with the
+    image and colouring options both snapshot calls take."""
+    request = pb.SnapshotRequest(width=width, height=height, collisions=collisions,
+                                 separation=separation, **target)
+    if tolerance is not None:
+        request.tolerance = tolerance
+    if camera is not None:
+        eye, target_point, up, fov = camera
+        request.camera.eye.CopyFrom(_vec3(eye))
+        request.camera.target.CopyFrom(_vec3(target_point))
+        if up is not None:
+            request.camera.up.CopyFrom(_vec3(up))
+        request.camera.fov_degrees = float(fov)
+    return request
+
+
 def read_token_file(path: Union[str, Path]) -> str:
     """The bearer token in a file: its first line, trimmed. Warns (on standard error) when every
     user can read the file; raises ProximaError naming the file when it cannot be read."""
@@ -572,53 +598,28 @@ class Client:
         return self._unary(self.stub.UploadObject, chunks())
 
     def snapshot(self, scene_id: str, width: int = 800, height: int = 600,
-                 camera: Optional[Tuple[ArrayLike, ArrayLike, Optional[ArrayLike], float]] = None,
-                 collisions: bool = True, tolerance: Optional[float] = None,
-                 separation: bool = True) -> Any:
+                 camera: _Camera = None, collisions: bool = True,
+                 tolerance: Optional[float] = None, separation: bool = True) -> Any:
         """Snapshot: an offscreen PNG of the scene, results coloured (collisions red, pairs within
         `tolerance` amber, closest pairs as segments). `camera`: (eye, target, up or None, vertical
         fov in degrees); None fits the scene. The SnapshotResponse (`png` bytes, `camera` used,
         `width`, `height`, `gl_renderer`, `collision_count`, `tolerance_count`,
         `segment_count`)."""
-        request = pb.SnapshotRequest(scene_id=scene_id, width=width, height=height,
-                                     collisions=collisions, separation=separation)
-        if tolerance is not None:
-            request.tolerance = tolerance
-        if camera is not None:
-            eye, target, up, fov = camera
-            vec = lambda v: pb.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa: E731
-            request.camera.eye.CopyFrom(vec(eye))
-            request.camera.target.CopyFrom(vec(target))
-            if up is not None:
-                request.camera.up.CopyFrom(vec(up))
-            request.camera.fov_degrees = float(fov)
+        request = _snapshot_request(width, height, camera, collisions, tolerance, separation,
+                                    scene_id=scene_id)
         return self._unary(self.stub.Snapshot, request)
 
     def snapshot_region(self, model: str, center: ArrayLike = (0.0, 0.0, 0.0),
                         radius: float = 0.0, room: str = "", max_triangles: int = 0,
-                        width: int = 800, height: int = 600,
-                        camera: Optional[Tuple[ArrayLike, ArrayLike, Optional[ArrayLike],
-                                               float]] = None,
+                        width: int = 800, height: int = 600, camera: _Camera = None,
                         collisions: bool = True, tolerance: Optional[float] = None,
                         separation: bool = True) -> Any:
         """Snapshot of a served massive model's region (the pieces FetchRegion selects for
         `center`, `radius`, `room`, `max_triangles`), coloured as snapshot() colours a scene.
         The SnapshotResponse, its `region` holding the pieces, triangles and objects drawn."""
-        request = pb.SnapshotRequest(model=model, radius=float(radius), room=room,
-                                     max_triangles=max_triangles, width=width, height=height,
-                                     collisions=collisions, separation=separation)
-        request.center.CopyFrom(pb.Vec3(x=float(center[0]), y=float(center[1]),
-                                        z=float(center[2])))
-        if tolerance is not None:
-            request.tolerance = tolerance
-        if camera is not None:
-            eye, target, up, fov = camera
-            vec = lambda v: pb.Vec3(x=float(v[0]), y=float(v[1]), z=float(v[2]))  # noqa: E731
-            request.camera.eye.CopyFrom(vec(eye))
-            request.camera.target.CopyFrom(vec(target))
-            if up is not None:
-                request.camera.up.CopyFrom(vec(up))
-            request.camera.fov_degrees = float(fov)
+        request = _snapshot_request(width, height, camera, collisions, tolerance, separation,
+                                    model=model, center=_vec3(center), radius=float(radius),
+                                    room=room, max_triangles=max_triangles)
         return self._unary(self.stub.Snapshot, request)
 
     # --- frames ---------------------------------------------------------------------------

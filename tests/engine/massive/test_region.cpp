@@ -16,21 +16,14 @@
 #include "proxima/massive/region.hpp"
 #include "proxima/massive/store.hpp"
 #include "proxima/massive/verify.hpp"
+#include "support/model_stores.hpp"
 
 namespace proxima::massive {
 namespace {
 
 namespace fs = std::filesystem;
 
-TriangleMesh box_mesh(Vec3 lo, Vec3 hi) {
-    TriangleMesh m;
-    for (int k = 0; k < 8; ++k) {
-        m.vertices.push_back({k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z});
-    }
-    m.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                   {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-    return m;
-}
+using test::box_mesh;
 
 // A row of unit boxes along x, 2 apart (box i spans x 2i..2i+1), plus a long bar split into
 // pieces (many thin boxes as one object) at y = 5.
@@ -42,13 +35,10 @@ class Region : public ::testing::Test {
         fs::remove_all(*s_dir);
         StoreOptions options;
         options.max_piece_bytes = 4096;  // the bar (120 triangles) splits
-        auto writer = StoreWriter::create(s_dir->string(), options);
-        ASSERT_TRUE(writer.ok()) << writer.status().to_string();
+        std::vector<ModelObject> objects;
         for (int i = 0; i < 5; ++i) {
             const Vec3 lo{2.0 * i, 0, 0};
-            ASSERT_TRUE((*writer)
-                            ->add({"box-" + std::to_string(i), box_mesh(lo, lo + Vec3{1, 1, 1})})
-                            .ok());
+            objects.push_back({"box-" + std::to_string(i), box_mesh(lo, lo + Vec3{1, 1, 1})});
         }
         TriangleMesh bar;
         for (int k = 0; k < 10; ++k) {
@@ -59,10 +49,8 @@ class Region : public ::testing::Test {
                 bar.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
             }
         }
-        ASSERT_TRUE((*writer)->add({"bar", bar}).ok());
-        auto summary = (*writer)->commit();
-        ASSERT_TRUE(summary.ok()) << summary.status().to_string();
-        ASSERT_GT(summary->split_objects, 0u);
+        objects.push_back({"bar", bar});
+        test::write_model_store(s_dir->string(), objects, options);
         auto store = Store::open(s_dir->string());
         ASSERT_TRUE(store.ok());
         s_store = new std::shared_ptr<const Store>(store.value());
