@@ -401,12 +401,14 @@ struct Client::Impl {
                                  milliseconds_text(took) + ")"};
     }
 
-    // A unary RPC: a fresh context per attempt (a context serves one call only).
+    // A unary RPC: a fresh context per attempt (a context serves one call only). `route` as for
+    // prepare().
     template <class Call>
-    Status unary(const std::string& operation, Retry policy, Call&& call) {
+    Status unary(const std::string& operation, Retry policy, Call&& call,
+                 const std::string& route = {}) {
         return with_retries(options.retry, operation, policy, [&] {
             grpc::ClientContext context;
-            prepare(context);
+            prepare(context, true, route);
             return from_grpc(call(context));
         });
     }
@@ -702,14 +704,17 @@ StatusOr<FrameResponse> Client::query(const std::string& scene_id, const FrameRe
 
 namespace {
 
-// One Snapshot call, for a scene's or a model region's request.
-StatusOr<render::Snapshot> snapshot_call(Client::Impl* impl, const pb::SnapshotRequest& message) {
+// One Snapshot call, for a scene's or a model region's request. `route` as for Impl::prepare.
+StatusOr<render::Snapshot> snapshot_call(Client::Impl* impl, const pb::SnapshotRequest& message,
+                                         const std::string& route = {}) {
     pb::SnapshotResponse response;
     // Snapshots change nothing: safe to repeat.
-    if (auto st = impl->unary("Snapshot", Retry::idempotent,
-                              [&](grpc::ClientContext& context) {
-                                  return impl->stub_now()->Snapshot(&context, message, &response);
-                              });
+    if (auto st = impl->unary(
+            "Snapshot", Retry::idempotent,
+            [&](grpc::ClientContext& context) {
+                return impl->stub_now()->Snapshot(&context, message, &response);
+            },
+            route);
         !st.ok()) {
         return st;
     }
@@ -729,7 +734,11 @@ StatusOr<render::Snapshot> Client::snapshot_region(const massive::RegionRequest&
                                                    const render::SnapshotRequest& request) {
     pb::SnapshotRequest message;
     wire::encode_model_snapshot_request(region, request, &message);
-    return snapshot_call(m_impl.get(), message);
+    // A room's view lives on the daemon its members meet on: the room's name is the route (as for
+    // fetch_region and join_review), unless the caller chose one.
+    return snapshot_call(
+        m_impl.get(), message,
+        m_impl->explicit_route || region.room.empty() ? std::string() : region.room);
 }
 
 StatusOr<std::unique_ptr<FrameStream>> Client::open_stream(const std::string& scene_id) {

@@ -312,7 +312,8 @@ class Client {
     // An offscreen PNG of a served massive model's region (the Snapshot RPC with `model`): the
     // pieces FetchRegion would send for `region` (its model, center, radius, room and
     // max_triangles; `objects` and `float64` are ignored), coloured and drawn as for a scene. The
-    // answer's `region` holds the pieces, triangles and objects drawn.
+    // answer's `region` holds the pieces, triangles and objects drawn. With a room, the call is
+    // routed by the room's name (as join_review), unless ConnectOptions::route was chosen.
     StatusOr<render::Snapshot> snapshot_region(const massive::RegionRequest& region,
                                                const render::SnapshotRequest& request);
     // Opens a frame stream on an existing scene, or, with an empty scene_id, a stream-owned scene

@@ -43,6 +43,26 @@ def test_route(daemon: Daemon) -> None:
     assert proxima.ROUTE_HEADER == "x-proxima-route"
 
 
+def test_room_calls_are_routed_by_the_room(daemon: Daemon) -> None:
+    """A region snapshot of a review room goes where the room's members meet: routed by the
+    room's name (as fetch_region and review), unless the Client was given a route."""
+    seen = []
+
+    class Recorder:
+        def Snapshot(self, request: Any, timeout: Any = None, metadata: Any = None) -> Any:
+            seen.append(dict(metadata)[proxima.ROUTE_HEADER])
+            return request
+
+    with proxima.Client(daemon.address) as c, \
+            proxima.Client(daemon.address, route="mine") as routed:
+        for client in (c, routed):
+            client.stub = Recorder()
+            client.snapshot_region("plant", room="hall-2")
+            client.snapshot_region("plant")
+            client.snapshot("scene-1")
+        assert seen == ["hall-2", c.route, c.route, "mine", "mine", "mine"]
+
+
 def test_scene_lifecycle_and_numpy_results(client: proxima.Client) -> None:
     scene = client.create_scene([A, B], name="pair")
     try:

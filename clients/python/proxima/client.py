@@ -521,8 +521,15 @@ class Client:
         self.float32 = float32
         self.inline_mesh_bytes = inline_mesh_bytes
 
-    def _unary(self, method: Callable[..., T], request: Any) -> T:
-        return _call(method, request, timeout=self.timeout, metadata=self._metadata)
+    def _unary(self, method: Callable[..., T], request: Any, room: str = "") -> T:
+        return _call(method, request, timeout=self.timeout, metadata=self._room_metadata(room))
+
+    def _room_metadata(self, room: str) -> Tuple[Tuple[str, str], ...]:
+        """The call metadata; a room's view lives on the daemon its members meet on, so a call
+        about `room` is routed by the room's name, unless this Client was given a route."""
+        if self._explicit_route or not room:
+            return self._metadata
+        return self._auth + ((ROUTE_HEADER, room),)
 
     def _float32(self) -> Optional[bool]:
         return True if self.float32 else None
@@ -620,7 +627,7 @@ class Client:
         request = _snapshot_request(width, height, camera, collisions, tolerance, separation,
                                     model=model, center=_vec3(center), radius=float(radius),
                                     room=room, max_triangles=max_triangles)
-        return self._unary(self.stub.Snapshot, request)
+        return self._unary(self.stub.Snapshot, request, room=room)
 
     # --- frames ---------------------------------------------------------------------------
 
@@ -674,10 +681,8 @@ class Client:
             model=model, center=pb.Vec3(x=float(c[0]), y=float(c[1]), z=float(c[2])),
             radius=radius, room=room, objects=list(objects), max_triangles=max_triangles,
             type=pb.SCALAR_TYPE_FLOAT64 if float64 else pb.SCALAR_TYPE_FLOAT32)
-        # A room's view lives on the daemon its members meet on: the room's name is the route.
-        metadata = (self._metadata if self._explicit_route or not room
-                    else self._auth + ((ROUTE_HEADER, room),))
-        return RegionStream(self.stub.FetchRegion(request, metadata=metadata, timeout=timeout),
+        return RegionStream(self.stub.FetchRegion(request, metadata=self._room_metadata(room),
+                                                  timeout=timeout),
                             lambda e: e)
 
     def review(self, room: str, model: str, member: str, avatar: Mesh, tolerance: float = 0.0,
@@ -686,7 +691,5 @@ class Client:
         coordinates; poses place it). The ReviewSession; `timeout` bounds each wait for an
         answer (None: none)."""
         # A room's members must meet on one daemon: the room's name is their route.
-        metadata = (self._metadata if self._explicit_route
-                    else self._auth + ((ROUTE_HEADER, room),))
-        return ReviewSession(self.stub, metadata, room, model, member, avatar, tolerance,
+        return ReviewSession(self.stub, self._room_metadata(room), room, model, member, avatar, tolerance,
                              nearest, timeout)
