@@ -1008,7 +1008,11 @@ struct ReviewSession::Impl {
     std::deque<StatusOr<ReviewEvent>> events;  // guarded by mu
     bool ended = false;                        // guarded by mu: Finish has returned
     bool discard = false;                      // guarded by mu: drop events (finishing)
-    Status final_status;                       // guarded by mu
+    // guarded by mu: wait_result is waiting for a result; other events need not wake it (with
+    // many room members most events are peer updates, and waking the caller for each one cost
+    // more than the rest of the client: it takes them all, in order, when the result comes)
+    bool result_only = false;
+    Status final_status;  // guarded by mu
     std::thread reader;
 
     void read_loop() {
@@ -1018,8 +1022,13 @@ struct ReviewSession::Impl {
             std::unique_lock lock(mu);
             changed.wait(lock, [&] { return discard || events.size() < MAX_QUEUED; });
             if (!discard) {
+                const bool wake = !result_only || !decoded.ok() ||
+                                  decoded->kind == ReviewEvent::Kind::result ||
+                                  events.size() + 1 >= MAX_QUEUED;
                 events.push_back(std::move(decoded));
-                changed.notify_all();
+                if (wake) {
+                    changed.notify_all();
+                }
             }
         }
         Status status;
@@ -1180,19 +1189,39 @@ StatusOr<ReviewEvent> ReviewSession::next(std::chrono::milliseconds timeout) {
 StatusOr<ReviewPoseResult> ReviewSession::wait_result(
     std::uint64_t sequence, const std::function<void(const ReviewEvent&)>& other,
     std::chrono::milliseconds timeout) {
+    // next()'s loop, except that the reader wakes this thread only for a result, an error, the
+    // end or a full queue (Impl::result_only), and each wake-up takes every queued event.
+    auto& s = *m_impl;
     const auto until = std::chrono::steady_clock::now() + timeout;
+    std::unique_lock lock(s.mu);
+    s.result_only = true;
     for (;;) {
-        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-            until - std::chrono::steady_clock::now());
-        auto event = next(std::max(left, std::chrono::milliseconds(0)));
+        if (!s.changed.wait_until(lock, until, [&] { return !s.events.empty() || s.ended; })) {
+            s.result_only = false;
+            return Status(StatusCode::deadline_exceeded,
+                          "no review event within " + std::to_string(timeout.count()) + " ms");
+        }
+        if (s.events.empty()) {
+            s.result_only = false;
+            return s.final_status.ok()
+                       ? Status(StatusCode::failed_precondition, "the review stream has ended")
+                       : s.final_status;
+        }
+        auto event = std::move(s.events.front());
+        s.events.pop_front();
+        s.changed.notify_all();  // the reader may wait for room in the queue
         if (!event.ok()) {
+            s.result_only = false;
             return event.status();
         }
         if (event->kind == ReviewEvent::Kind::result && event->result.sequence == sequence) {
+            s.result_only = false;
             return std::move(event->result);
         }
         if (other) {
+            lock.unlock();
             other(event.value());
+            lock.lock();
         }
     }
 }

@@ -110,6 +110,20 @@ Status ModelView::move_object(std::uint32_t object, const Affine& transform) {
     if (deleted(object)) {
         return not_found("move: no object " + std::to_string(object) + " in the model");
     }
+    if (object < m_store->objects().size() && transform.m == Affine{}.m) {
+        // Back to the stored placement: the object reads from its stored pieces again, through
+        // the cache, and its in-memory copy goes (an overlay copy is not charged to the cache's
+        // budget, so a room whose members move objects away and back would otherwise keep every
+        // object it ever moved in memory). The same geometry bit for bit: the identity map
+        // gives each stored coordinate back exactly.
+        std::unique_lock lock(m_mutex);
+        auto next = std::make_shared<Snapshot>(*m_snapshot);
+        std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
+        next->masked[object] = 0;
+        ++next->version;
+        m_snapshot = std::move(next);
+        return {};
+    }
     // The stored (or as-added) coordinates under the new map.
     TriangleMesh mesh;
     std::string name;

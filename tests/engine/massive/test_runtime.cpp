@@ -525,3 +525,57 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
                 static_cast<unsigned long long>(store->objects().size()), poses, avatar_seconds);
     fs::remove_all(dir);
 }
+
+TEST(Avatar, MovingObjectsAwayAndBackKeepsNoCopies) {
+    // The load harness's edit pattern (issue #16 item 2): objects moved away and back, one after
+    // the other. A move back (the identity) returns the object to its stored pieces, so the
+    // room's view holds no in-memory copy of it: the overlay stays bounded by the objects that
+    // are away now, not by every object ever moved.
+    const auto dir = temp_dir("avatar-away-back");
+    auto store = plant_store(dir, 40'000, 256ull << 10);
+    auto cache = std::make_shared<GeometryCache>(8ull << 20);
+    auto view = std::make_shared<ModelView>(store, cache);
+    const auto objects = static_cast<std::uint32_t>(store->objects().size());
+    ASSERT_GE(objects, 4u);
+    const TriangleMesh avatar = sphere_mesh({0, 0, 0}, 0.6, 12);
+    auto tracker = AvatarTracker::create(view, avatar, 1);
+    ASSERT_TRUE(tracker.ok());
+    Aabb box;
+    for (const auto& o : store->objects()) {
+        box.extend(o.box);
+    }
+    Affine away;
+    away.m[3] = 0.3;
+    std::vector<TriangleMesh> stored;
+    for (std::uint32_t o = 0; o < objects; ++o) {
+        stored.push_back(*read_object(*store, o));
+    }
+    std::uint64_t version = view->version();
+    for (std::uint32_t o = 0; o < objects; ++o) {
+        ASSERT_TRUE(view->move_object(o, away).ok());
+        EXPECT_EQ(view->snapshot()->overlay.size(), 1u);
+        EXPECT_EQ(view->snapshot()->masked[o], 1);
+        ASSERT_TRUE(view->move_object(o, Affine{}).ok());
+        EXPECT_EQ(view->snapshot()->overlay.size(), 0u) << "object " << o << " kept a copy";
+        EXPECT_EQ(view->snapshot()->masked[o], 0);
+        EXPECT_FALSE(view->deleted(o));
+        version += 2;
+        EXPECT_EQ(view->version(), version) << "each move is an edit";
+    }
+    // The view answers as the stored model again (the in-memory engine on the stored objects).
+    const Vec3 at = box.lo + (box.hi - box.lo) * 0.5;
+    Affine pose;
+    pose.m = {1, 0, 0, at.x, 0, 1, 0, at.y, 0, 0, 1, at.z};
+    AvatarQueryOptions options;
+    options.tolerance = 0.25;
+    auto r = (*tracker)->query(pose, options);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    TriangleMesh posed = avatar;
+    posed.vertices = (*tracker)->posed_vertices();
+    check_against_engine(*view, stored, posed, *r, options.tolerance, "after away and back");
+    // A deleted object cannot be moved back; an added one is not a stored object.
+    ASSERT_TRUE(view->delete_object(0).ok());
+    EXPECT_FALSE(view->move_object(0, Affine{}).ok());
+    EXPECT_TRUE(view->deleted(0));
+    fs::remove_all(dir);
+}

@@ -49,7 +49,9 @@ class ModelView {
     const PieceIndex& index() const { return m_index; }
 
     // Each edit is validated whole (unknown or deleted object, non-finite transform, invalid
-    // mesh) and then applied; a failed edit changes nothing.
+    // mesh) and then applied; a failed edit changes nothing. A moved stored object is held in
+    // memory (an overlay object, not charged to the cache's budget) until it is deleted or moved
+    // back to its stored placement (the identity transform), which drops the copy.
     Status move_object(std::uint32_t object, const Affine& transform);
     StatusOr<std::uint32_t> add_object(ModelObject object);
     Status delete_object(std::uint32_t object);
