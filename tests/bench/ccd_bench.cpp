@@ -12,9 +12,12 @@
 // Without files, every CSV under PROXIMA_DATA_DIR/ccd-queries (the kind from the path).
 // --quick: one small file (unit-tests/edge-edge/data_0_1.csv), for the ctest smoke run.
 // --repeat R: time each query R times and keep the fastest (steadier timings).
+// The last line is a digest of every answer (hit, capped, the toi's bits), to compare builds.
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -157,6 +160,12 @@ int main(int argc, char** argv) {
 
     Row all;
     all.name = "TOTAL";
+    std::uint64_t digest = 1469598103934665603ULL;  // FNV-1a over every answer
+    auto mix = [&digest](std::uint64_t x) {
+        for (int i = 0; i < 8; ++i) {
+            digest = (digest ^ ((x >> (8 * i)) & 0xff)) * 1099511628211ULL;
+        }
+    };
     int status = 0;
     for (const auto& file : files) {
         auto kind = ccd_kind_from_path(file);
@@ -189,6 +198,8 @@ int main(int argc, char** argv) {
             ++row.queries;
             row.seconds.push_back(best);
             row.boxes += r.boxes;
+            mix((r.hit ? 1U : 0U) | (r.capped ? 2U : 0U));
+            mix(std::bit_cast<std::uint64_t>(r.toi));
             row.positives += r.hit ? 1 : 0;
             row.capped += r.capped ? 1 : 0;
             if (q.truth) {
@@ -208,6 +219,8 @@ int main(int argc, char** argv) {
     }
     std::printf("\n");
     print_row(all);
+    std::printf("answer digest (hit, capped, toi bits) %016llx\n",
+                static_cast<unsigned long long>(digest));
     if (all.false_negatives > 0) {
         std::printf("FALSE NEGATIVES: %zu\n", all.false_negatives);
         status = 1;

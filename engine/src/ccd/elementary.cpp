@@ -97,6 +97,11 @@ struct Problem {
     double reject[3] = {};   // d_k: exclusion threshold
     double accept[3] = {};   // d_k + tol_k + e_k: acceptance threshold
     double toi_width = 0.0;  // a region is accepted only once t1 - t0 <= this (toi_tolerance)
+    // Direction exclusion (see "Direction exclusion" below): a region is also excluded when
+    // F . w[i] lies beyond w_thr[i] (or below -w_thr[i]) at all 8 corners.
+    int directions = 0;
+    double w[4][3] = {};
+    double w_thr[4] = {};
     bool valid = false;
 };
 
@@ -166,8 +171,72 @@ double scale_up(double x) {
     return s * 0x1p64 < x ? std::nextafter(s, std::numeric_limits<double>::infinity()) : s;
 }
 
+// Direction exclusion. An accepted region's corner (t0, u0, v0) has exact |F_k| <= a_k :=
+// d + tol + 2^-45 M_k + 2^-1059 on every axis (see the prefilter's comment below: d + tol + 2 e_k
+// when accepted within the band, d + 2^-45 M_k at the width floor), so |F . w| <= sum |w_k| a_k
+// there. F . w is multilinear in (t, u, v) like each F_k, so over a region it lies between its
+// values at the 8 corners; if those all exceed sum |w_k| a_k (or all lie below its negative), no
+// region inside is ever accepted, and excluding it cannot change which accepted region has the
+// smallest t0. The computed corner value fl(w_0 f_0 + w_1 f_1 + w_2 f_2), with |w_k| <= 1, each
+// f_k within 40 u M_k of the exact F_k and |f_k| <= 6 M_k (+ rounding), errs by at most
+// sum |w_k| (40 + 19) u M_k plus a few 2^-1075 of underflow: below 2^-47 sum |w_k| M_k + 2^-1070.
+// The threshold w_thr = sum |w_k| (d + tol + 2^-44 M_k) (1 + 2^-40) + 2^-1000 covers a_k, that
+// error, and its own roundings (relative < 8 u). Only when no axis is scaled (M_k <= 2^200, so
+// products cannot overflow) and w is finite and nonzero; w is divided by its largest |component|
+// so that |w_k| <= 1. Which w is tried changes only how many regions are examined: the normal of
+// the triangle (vf) or the common normal of the edges (ee) at mid-frame, and the in-plane normals
+// of the triangle's sides (vf) or of the two edges (ee).
+void add_direction(Problem& pr, const Vec3& n, const double largest[3], double d, double tol) {
+    const double big = std::max({std::abs(n.x), std::abs(n.y), std::abs(n.z)});
+    if (!(big > 0.0) || !std::isfinite(big)) {
+        return;
+    }
+    const double w[3] = {n.x / big, n.y / big, n.z / big};
+    double thr = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        thr += std::abs(w[k]) * (d + tol + 0x1p-44 * largest[k]);
+    }
+    thr = thr * (1.0 + 0x1p-40) + 0x1p-1000;
+    if (!(thr < std::numeric_limits<double>::infinity())) {
+        return;
+    }
+    for (int k = 0; k < 3; ++k) {
+        pr.w[pr.directions][k] = w[k];
+    }
+    pr.w_thr[pr.directions] = thr;
+    ++pr.directions;
+}
+
+void add_directions(Problem& pr, const CcdPoints& points, const double largest[3], double d,
+                    double tol) {
+    for (int k = 0; k < 3; ++k) {
+        if (!(largest[k] <= 0x1p200)) {
+            return;
+        }
+    }
+    Vec3 mid[4];
+    for (std::size_t j = 0; j < 4; ++j) {
+        mid[j] = points[j] + points[j + 4];  // twice the mid-frame point: only a direction
+    }
+    if (pr.vertex_face) {
+        const Vec3 n = cross(mid[2] - mid[1], mid[3] - mid[1]);
+        add_direction(pr, n, largest, d, tol);
+        for (int j = 0; j < 3; ++j) {
+            add_direction(pr, cross(n, mid[1 + (j + 1) % 3] - mid[1 + j]), largest, d, tol);
+        }
+    } else {
+        const Vec3 da = mid[1] - mid[0];
+        const Vec3 db = mid[3] - mid[2];
+        const Vec3 n = cross(da, db);
+        add_direction(pr, n, largest, d, tol);
+        add_direction(pr, cross(n, da), largest, d, tol);
+        add_direction(pr, cross(n, db), largest, d, tol);
+    }
+}
+
 Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol) {
     Problem pr;
+    double largest[3] = {};  // M_k
     pr.vertex_face = kind == CcdKind::vertex_face;
     // Differences (x - y) of point indices within one frame: g0, gu, gv.
     static constexpr int VF[3][2] = {{0, 1}, {2, 1}, {3, 1}};
@@ -202,8 +271,10 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
         pr.error[k] = m * ERROR_SCALE + ERROR_ABSOLUTE;
         pr.reject[k] = dk;
         pr.accept[k] = dk + tk + pr.error[k];
+        largest[k] = m;
     }
     pr.valid = true;
+    add_directions(pr, points, largest, d, tol);
     return pr;
 }
 
@@ -257,6 +328,22 @@ inline bool examine(const Problem& pr, Region& r) {
         }
         los[k] = lo;
         his[k] = hi;
+    }
+    // Then the direction exclusion (see add_direction). A region within the band on every axis
+    // never passes it, but such regions are rare: no shortcut for them.
+    for (int i = 0; i < pr.directions; ++i) {
+        const double* w = pr.w[i];
+        double x = w[0] * f[0][0] + w[1] * f[1][0] + w[2] * f[2][0];
+        double lo = x;
+        double hi = x;
+        for (int c = 1; c < 8; ++c) {
+            x = w[0] * f[0][c] + w[1] * f[1][c] + w[2] * f[2][c];
+            lo = std::min(lo, x);
+            hi = std::max(hi, x);
+        }
+        if (lo > pr.w_thr[i] || hi < -pr.w_thr[i]) {
+            return false;
+        }
     }
     bool accepted = true;
     // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
@@ -335,6 +422,9 @@ ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOp
     }
     Problem pr = make_problem(kind, points, d, tol);
     pr.toi_width = options.toi_tolerance > 0.0 ? options.toi_tolerance : 0.0;  // NaN: the floor
+    if (!options.direction_exclusion) {
+        pr.directions = 0;
+    }
     if (!pr.valid) {
         // Non-finite coordinates: nothing can be excluded.
         result.hit = result.capped = true;
