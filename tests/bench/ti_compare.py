@@ -184,7 +184,7 @@ def run_ours(proxima, kind, csv, toi_tol):
     return json.loads(r.stdout)
 
 
-def exact_earliest(coords, kind, eps=Fraction(1, 2**20), limit=200000):
+def exact_earliest(coords, kind, limit, eps=Fraction(1, 2**20)):
     """An exact lower bound on the earliest contact of the query (its coordinates rounded to
     doubles, as both tools see them): boxes of (t, u, v) in order of t are excluded when the 8
     corner values of F (trilinear, so they bound it over the box) lie on one side of 0 on an axis,
@@ -248,6 +248,8 @@ def main():
     ap.add_argument("--peer", default=str(ROOT.parent / "shared/peers/tight-inclusion"))
     ap.add_argument("--work", default=str(ROOT / "build/ti-compare"))
     ap.add_argument("--no-sim", action="store_true")
+    ap.add_argument("--exact-limit", type=int, default=3000,
+                    help="boxes per query for the exact check (Python rationals: ~0.5 ms a box)")
     ap.add_argument("--rebuild", action="store_true")
     ap.add_argument("--json", help="write every per-file, per-round figure here")
     a = ap.parse_args()
@@ -407,7 +409,7 @@ def main():
                     if name not in parsed:
                         parsed[name] = read_benchmark_csv(csv)
                     coords = parsed[name][i][1]
-                    verdict, t0 = exact_earliest(coords, kind)
+                    verdict, t0 = exact_earliest(coords, kind, a.exact_limit)
                     ok = verdict == "none" or (verdict == "from" and t0 >= ours_toi[i])
                     s["exact_ok" if ok else "exact_unsure"] += 1
                     s["exact_none"] += verdict == "none"
