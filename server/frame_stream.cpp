@@ -84,7 +84,7 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
         v1::FrameResult result;
         Status s = m_admission.principal()->admit_frame();
         if (s.ok()) {
-            s = guarded([&] { return run(frame, &result, scene_lock != nullptr); });
+            s = guarded([&] { return run(frame, &result, scene_lock); });
         }
         if (scene_lock != nullptr) {
             scene_lock->unlock();
@@ -131,8 +131,9 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
 
     // One frame, off the lock. m_scene and m_owns_scene are only touched here (one task at a
     // time) and in OnDone (after the last task).
-    // `scene_locked`: the caller holds the bound scene's mutex (handle_inline).
-    Status run(const v1::Frame& frame, v1::FrameResult* out, bool scene_locked) {
+    // `scene_lock`: the bound scene's mutex, held by the caller (handle_inline), or null.
+    Status run(const v1::Frame& frame, v1::FrameResult* out,
+               const std::unique_lock<std::mutex>* scene_lock) {
         const auto& limits = m_shared.config.limits;
         if (m_scene) {
             if (!frame.scene_id().empty() && frame.scene_id() != m_scene->id) {
@@ -140,7 +141,7 @@ class FrameStreamReactor final : public OrderedStream<v1::Frame, v1::FrameResult
                                         frame.scene_id() + " but this stream is bound to scene " +
                                         m_scene->id);
             }
-            return run_frame(*m_scene, frame, limits, &m_cancel, out, {}, scene_locked);
+            return run_frame(*m_scene, frame, limits, &m_cancel, out, {}, scene_lock);
         }
         const auto& principal = m_admission.principal();
         if (!frame.scene_id().empty()) {

@@ -54,7 +54,8 @@ Holding holding_after(const Scene& scene, const SceneUpdate& update) {
 
 Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits,
                  const CancelToken* cancel, v1::FrameResult* out,
-                 const std::function<Status()>& after_apply, bool scene_locked) {
+                 const std::function<Status()>& after_apply,
+                 const std::unique_lock<std::mutex>* held) {
     const auto start = std::chrono::steady_clock::now();
     auto decoded = wire::decode_frame(frame);
     if (!decoded.ok()) {
@@ -62,8 +63,10 @@ Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits
     }
     const bool self_points = decoded->self_points;
     std::unique_lock lock(entry.mutex, std::defer_lock);
-    if (!scene_locked) {
+    if (held == nullptr) {
         lock.lock();
+    } else if (held->mutex() != &entry.mutex || !held->owns_lock()) {
+        return {StatusCode::internal, "run_frame: the lock held is not scene " + entry.id + "'s"};
     }
     if (entry.deleted.load()) {
         return not_found("scene " + entry.id + " was deleted");

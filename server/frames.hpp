@@ -5,6 +5,7 @@
 // (proxima/frame_pipeline.hpp).
 
 #include <functional>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -31,12 +32,13 @@ Holding holding_after(const Scene& scene, const SceneUpdate& update);
 // one stopped by `cancel` before applying changes nothing, one stopped during its queries keeps
 // its (valid) changes. `after_apply`, when given, runs under the mutex right after the changes
 // are applied (a stream registers the scene its first frame created); its failure fails the
-// frame. Sets every field of `out`, stats.server_seconds included. `scene_locked`: the caller
-// holds the scene's mutex already (a frame run on a gRPC thread, which took it without waiting);
-// the frame is then decoded under it.
+// frame. Sets every field of `out`, stats.server_seconds included. `held`: the scene's mutex,
+// already held by the caller (a frame run on a gRPC thread, which took it without waiting); the
+// frame is then decoded under it. Null: run_frame takes the mutex itself.
 Status run_frame(SceneEntry& entry, const v1::Frame& frame, const Limits& limits,
                  const CancelToken* cancel, v1::FrameResult* out,
-                 const std::function<Status()>& after_apply = {}, bool scene_locked = false);
+                 const std::function<Status()>& after_apply = {},
+                 const std::unique_lock<std::mutex>* held = nullptr);
 
 // Validates and appends objects (CreateScene's inline objects, a finished upload), all or none;
 // `field` names them in error messages ("objects").

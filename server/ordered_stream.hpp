@@ -74,10 +74,10 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
             // Idle: the request just queued is the only one.
             if (inline_candidate_locked(m_requests.front().request, m_requests.front().charged)) {
                 lock.unlock();
-                process(true);
+                process_inline();
                 return;
             }
-            m_shared.pool.submit([this] { process(false); });
+            m_shared.pool.submit([this] { process(); });
         }
     }
 
@@ -326,66 +326,87 @@ class OrderedStream : public grpc::ServerBidiReactor<Request, Response>, public 
         this->Finish(wire::to_grpc(final));
     }
 
-    // The stream's task: the queued requests in order, until none is left or the stream stops.
-    // `on_grpc_thread`: run by OnReadDone for the one request it queued (inline_candidate_locked),
-    // which is tried with handle_inline; whatever else is queued by then goes to a worker.
-    void process(bool on_grpc_thread) {
-        for (bool first = true;; first = false) {
+    // The stream's task on a worker: the queued requests in order, until none is left or the
+    // stream stops.
+    void process() {
+        for (;;) {
             Queued next;
             {
                 std::lock_guard lock(mutex());
                 if (m_requests.empty() || stopped_locked()) {
-                    m_processing = false;
-                    maybe_finish_locked();
-                    return;
-                }
-                if (on_grpc_thread && !first) {
-                    m_shared.pool.submit([this] { process(false); });
+                    stop_processing_locked();
                     return;
                 }
                 next = std::move(m_requests.front());
                 m_requests.pop_front();
             }
-            Status s;
-            if (on_grpc_thread) {
-                std::optional<Status> done;
-                s = guarded([&] {
-                    done = handle_inline(next.request, next.charged);
-                    return Status{};
-                });
-                if (s.ok() && !done) {
-                    // It would have waited: back to the front of the queue, for a worker.
-                    std::lock_guard lock(mutex());
-                    if (stopped_locked()) {
-                        on_dropped_locked(next.charged);
-                        m_processing = false;
-                        maybe_finish_locked();
-                        return;
-                    }
-                    m_requests.push_front(std::move(next));
-                    m_shared.pool.submit([this] { process(false); });
-                    return;
-                }
-                if (s.ok()) {
-                    s = *done;
-                }
-            } else {
-                s = guarded([&] { return handle(next.request, next.charged); });
+            const Status s = guarded([&] { return handle(next.request, next.charged); });
+            if (!s.ok()) {
+                fail(s);
+                return;
             }
-            if (s.ok()) {
-                continue;
-            }
-            on_failed();
+        }
+    }
+
+    // The stream's task on the gRPC thread that read the one request queued
+    // (inline_candidate_locked): tried with handle_inline; a request it would have had to wait
+    // for goes back to the front of the queue, and whatever is queued after it goes to a worker.
+    void process_inline() {
+        Queued next;
+        {
             std::lock_guard lock(mutex());
-            if (!m_error) {
-                m_error = s;
+            if (m_requests.empty() || stopped_locked()) {
+                stop_processing_locked();
+                return;
             }
-            on_closing_locked();
-            drop_requests_locked();
-            m_processing = false;
-            maybe_finish_locked();
+            next = std::move(m_requests.front());
+            m_requests.pop_front();
+        }
+        std::optional<Status> done;
+        Status s = guarded([&] {
+            done = handle_inline(next.request, next.charged);
+            return Status{};
+        });
+        if (s.ok() && done) {
+            s = *done;
+        }
+        if (!s.ok()) {
+            fail(s);
             return;
         }
+        std::lock_guard lock(mutex());
+        if (stopped_locked()) {
+            if (!done) {
+                on_dropped_locked(next.charged);
+            }
+            stop_processing_locked();
+            return;
+        }
+        if (!done) {
+            m_requests.push_front(std::move(next));
+        }
+        if (m_requests.empty()) {
+            stop_processing_locked();
+            return;
+        }
+        m_shared.pool.submit([this] { process(); });
+    }
+
+    void stop_processing_locked() {
+        m_processing = false;
+        maybe_finish_locked();
+    }
+
+    // A request failed: the stream ends with its status; the rest is dropped.
+    void fail(const Status& s) {
+        on_failed();
+        std::lock_guard lock(mutex());
+        if (!m_error) {
+            m_error = s;
+        }
+        on_closing_locked();
+        drop_requests_locked();
+        stop_processing_locked();
     }
 
     grpc::CallbackServerContext* const m_context;  // gRPC's, valid until OnDone returns
