@@ -88,6 +88,14 @@ constexpr double HUGE_COORDINATE = 0x1p1000;  // axes beyond this are scaled by 
 constexpr double HUGE_SCALE = 0x1p-64;
 constexpr double MIN_WIDTH = 0x1p-50;  // no side of a region is bisected below this width
 
+// The solver's inner functions are forced inline so that the copy of the solver compiled for AVX2
+// (solve_avx2 below) gets its own copies of them in its instruction set.
+#if defined(__GNUC__) || defined(__clang__)
+#define PROXIMA_CCD_INLINE inline __attribute__((always_inline))
+#else
+#define PROXIMA_CCD_INLINE inline
+#endif
+
 // One test, with the coordinates arranged per axis.
 struct Problem {
     bool vertex_face = true;
@@ -278,19 +286,54 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
     return pr;
 }
 
-// F_k at the 8 corners of r: fk[4 ti + 2 ui + vi].
-inline void corners_axis(const Problem& pr, int k, const double t[2], const double u[2],
-                         const double v[2], double fk[8]) {
+// The 8 corner values of one axis (or one direction) as four pairs: pair 2 ti + ui holds the
+// corners (ti, ui, vi = 0) and (ti, ui, vi = 1). GCC's and Clang's vector extensions: on baseline
+// x86-64 each operation on a pair is one SSE2 instruction, and every lane is rounded exactly as
+// the scalar expression it replaces (IEEE operations on doubles, no fused multiply-add: baseline
+// x86-64 has none), so the values, and the rounding bound above, are those of the scalar formulas.
+using Pair = double __attribute__((vector_size(16)));
+using PairBits = std::int64_t __attribute__((vector_size(16)));
+struct Corners {
+    Pair q[4];
+    double operator[](int c) const { return q[c >> 1][c & 1]; }  // corner 4 ti + 2 ui + vi
+};
+
+PROXIMA_CCD_INLINE Pair pair_min(const Pair& a, const Pair& b) {
+    return a < b ? a : b;
+}
+PROXIMA_CCD_INLINE Pair pair_max(const Pair& a, const Pair& b) {
+    return a > b ? a : b;
+}
+PROXIMA_CCD_INLINE Pair pair_abs(const Pair& a) {  // as std::abs: the sign bit cleared
+    constexpr std::int64_t SIGN_OFF = std::numeric_limits<std::int64_t>::max();
+    const PairBits mask = {SIGN_OFF, SIGN_OFF};
+    return reinterpret_cast<Pair>(reinterpret_cast<PairBits>(a) & mask);
+}
+
+PROXIMA_CCD_INLINE double lowest(const Corners& f) {
+    const Pair m = pair_min(pair_min(f.q[0], f.q[1]), pair_min(f.q[2], f.q[3]));
+    return std::min(m[0], m[1]);
+}
+PROXIMA_CCD_INLINE double highest(const Corners& f) {
+    const Pair m = pair_max(pair_max(f.q[0], f.q[1]), pair_max(f.q[2], f.q[3]));
+    return std::max(m[0], m[1]);
+}
+
+// F_k at the 8 corners: for each t, g(t) = fl(fl((1 - t) G_t0) + fl(t G_t1)) for g0, gu, gv,
+// then F = fl(fl(g0 - fl(u gu)) - fl(v gv)) in every lane.
+PROXIMA_CCD_INLINE void corners_axis(const Problem& pr, int k, const double t[2], const double u[2],
+                                     const Pair& v, Corners& fk) {
     for (int ti = 0; ti < 2; ++ti) {
         const double tt = t[ti];
         const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
         const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
         const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
         const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
+        const Pair gvv = {gv, gv};
         for (int ui = 0; ui < 2; ++ui) {
             const double h = g0 - u[ui] * gu;
-            fk[4 * ti + 2 * ui + 0] = h - v[0] * gv;
-            fk[4 * ti + 2 * ui + 1] = h - v[1] * gv;
+            const Pair hh = {h, h};
+            fk.q[2 * ti + ui] = hh - v * gvv;
         }
     }
 }
@@ -298,30 +341,30 @@ inline void corners_axis(const Problem& pr, int k, const double t[2], const doub
 // F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
 inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
                     double f[3][8]) {
+    const Pair vv = {v[0], v[1]};
     for (int k = 0; k < 3; ++k) {
-        corners_axis(pr, k, t, u, v, f[k]);
+        Corners fk;
+        corners_axis(pr, k, t, u, vv, fk);
+        for (int c = 0; c < 8; ++c) {
+            f[k][c] = fk[c];
+        }
     }
 }
 
 // Examines r: false when it is excluded; otherwise sets r.split (3 when accepted).
-inline bool examine(const Problem& pr, Region& r) {
+PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r) {
     const double t[2] = {r.t0, r.t1};
     const double u[2] = {r.u0, r.u1};
-    const double v[2] = {r.v0, r.v1};
+    const Pair v = {r.v0, r.v1};
     // First the exclusion test, axis by axis, computing an axis' corners only when the axes
     // before it did not exclude the region (the values are the same either way).
-    double f[3][8];
+    Corners f[3];
     double los[3];
     double his[3];
     for (int k = 0; k < 3; ++k) {
-        double* fk = f[k];
-        corners_axis(pr, k, t, u, v, fk);
-        double lo = fk[0];
-        double hi = fk[0];
-        for (int c = 1; c < 8; ++c) {
-            lo = std::min(lo, fk[c]);
-            hi = std::max(hi, fk[c]);
-        }
+        corners_axis(pr, k, t, u, v, f[k]);
+        const double lo = lowest(f[k]);
+        const double hi = highest(f[k]);
         // Rounding is monotone and the thresholds are doubles: see the file comment.
         if (hi + pr.error[k] < -pr.reject[k] || lo - pr.error[k] > pr.reject[k]) {
             return false;
@@ -329,19 +372,19 @@ inline bool examine(const Problem& pr, Region& r) {
         los[k] = lo;
         his[k] = hi;
     }
-    // Then the direction exclusion (see add_direction). A region within the band on every axis
-    // never passes it, but such regions are rare: no shortcut for them.
+    // Then the direction exclusion (see add_direction): w_0 f_0 + w_1 f_1 + w_2 f_2 at each
+    // corner. A region within the band on every axis never passes it, but such regions are rare:
+    // no shortcut for them.
     for (int i = 0; i < pr.directions; ++i) {
         const double* w = pr.w[i];
-        double x = w[0] * f[0][0] + w[1] * f[1][0] + w[2] * f[2][0];
-        double lo = x;
-        double hi = x;
-        for (int c = 1; c < 8; ++c) {
-            x = w[0] * f[0][c] + w[1] * f[1][c] + w[2] * f[2][c];
-            lo = std::min(lo, x);
-            hi = std::max(hi, x);
+        const Pair w0 = {w[0], w[0]};
+        const Pair w1 = {w[1], w[1]};
+        const Pair w2 = {w[2], w[2]};
+        Corners x;
+        for (int j = 0; j < 4; ++j) {
+            x.q[j] = w0 * f[0].q[j] + w1 * f[1].q[j] + w2 * f[2].q[j];
         }
-        if (lo > pr.w_thr[i] || hi < -pr.w_thr[i]) {
+        if (lowest(x) > pr.w_thr[i] || highest(x) < -pr.w_thr[i]) {
             return false;
         }
     }
@@ -352,7 +395,7 @@ inline bool examine(const Problem& pr, Region& r) {
     double du = 0.0;
     double dv = 0.0;
     for (int k = 0; k < 3; ++k) {
-        const double* fk = f[k];
+        const Corners& fk = f[k];
         const double lo = los[k];
         const double hi = his[k];
         if (hi <= pr.accept[k] && lo >= -pr.accept[k]) {
@@ -361,18 +404,16 @@ inline bool examine(const Problem& pr, Region& r) {
         accepted = false;
         const double window = pr.reject[k] + pr.error[k];
         const double inv_slack = 1.0 / (std::min(hi + window, window - lo) + pr.error[k]);
-        double ct = 0.0;
-        double cu = 0.0;
-        double cv = 0.0;
-        for (int c = 0; c < 4; ++c) {
-            ct = std::max(ct, std::abs(fk[c + 4] - fk[c]));
+        // The largest change along t (corners c and c + 4), u (c, c + 2), v (c, c + 1).
+        const Pair mt = pair_max(pair_abs(fk.q[2] - fk.q[0]), pair_abs(fk.q[3] - fk.q[1]));
+        const Pair mu = pair_max(pair_abs(fk.q[1] - fk.q[0]), pair_abs(fk.q[3] - fk.q[2]));
+        Pair mv = pair_abs(fk.q[0] - __builtin_shufflevector(fk.q[0], fk.q[0], 1, 0));
+        for (int j = 1; j < 4; ++j) {
+            mv = pair_max(mv, pair_abs(fk.q[j] - __builtin_shufflevector(fk.q[j], fk.q[j], 1, 0)));
         }
-        for (int c : {0, 1, 4, 5}) {
-            cu = std::max(cu, std::abs(fk[c + 2] - fk[c]));
-        }
-        for (int c : {0, 2, 4, 6}) {
-            cv = std::max(cv, std::abs(fk[c + 1] - fk[c]));
-        }
+        const double ct = std::max(mt[0], mt[1]);
+        const double cu = std::max(mu[0], mu[1]);
+        const double cv = mv[0];  // both lanes hold the same magnitudes
         dt = std::max(dt, ct * inv_slack);
         du = std::max(du, cu * inv_slack);
         dv = std::max(dv, cv * inv_slack);
@@ -407,7 +448,8 @@ inline bool examine(const Problem& pr, Region& r) {
     return true;
 }
 
-ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
+PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& points,
+                                               const ElementaryOptions& options) {
     ElementaryResult result;
     double d = options.min_distance;
     if (std::isnan(d)) {
@@ -484,6 +526,40 @@ ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOp
     return result;
 }
 
+// The solver compiled for baseline x86-64 (SSE2), and, on x86-64, a second copy compiled for AVX2,
+// used when the processor has it (checked once at run time; Debian's packages are baseline, so
+// the engine never requires it). The copies compute every value with the same IEEE operations in
+// the same order (AVX2 only adds three-operand encodings and wider registers; fused multiply-add
+// is a separate instruction set, not enabled), so they give the same answers bit for bit:
+// CcdElementary.DispatchedSolverEqualsPortable checks it on random and public queries.
+ElementaryResult solve_portable(CcdKind kind, const CcdPoints& points,
+                                const ElementaryOptions& options) {
+    return solve_body(kind, points, options);
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2"))) ElementaryResult solve_avx2(CcdKind kind, const CcdPoints& points,
+                                                            const ElementaryOptions& options) {
+    return solve_body(kind, points, options);
+}
+
+// Read once at start-up (a call before that, from another file's static initializer, would
+// take the portable copy: the same answers).
+bool cpu_has_avx2() {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") != 0;
+}
+const bool HAS_AVX2 = cpu_has_avx2();
+
+ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
+    return HAS_AVX2 ? solve_avx2(kind, points, options) : solve_portable(kind, points, options);
+}
+#else
+ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
+    return solve_portable(kind, points, options);
+}
+#endif
+
 }  // namespace
 
 const char* ccd_kind_name(CcdKind kind) {
@@ -501,6 +577,11 @@ ElementaryResult edge_edge(const CcdPoints& points, const ElementaryOptions& opt
 ElementaryResult elementary(CcdKind kind, const CcdPoints& points,
                             const ElementaryOptions& options) {
     return solve(kind, points, options);
+}
+
+ElementaryResult elementary_portable(CcdKind kind, const CcdPoints& points,
+                                     const ElementaryOptions& options) {
+    return solve_portable(kind, points, options);
 }
 
 // The prefilter (elementary_prefilter_rejects; docs/algorithms.md, "CCD prefilter"). What it
@@ -555,7 +636,8 @@ namespace {
 
 // Filter 2 for one direction w: all differences (both frames) beyond the threshold on one side.
 template <int N>
-bool separated_along(const Vec3 (&diff)[N], const Vec3& w, double slack, double m) {
+PROXIMA_CCD_INLINE bool separated_along(const Vec3 (&diff)[N], const Vec3& w, double slack,
+                                        double m) {
     const double norm1 = std::abs(w.x) + std::abs(w.y) + std::abs(w.z);
     if (!(0x1p-44 * m * norm1 >= 0x1p-1000)) {
         return false;  // w too short: underflowed products could err by more than the slack
@@ -586,7 +668,7 @@ bool separated_along(const Vec3 (&diff)[N], const Vec3& w, double slack, double 
 
 // Filter 1 on axis k.
 template <int N>
-bool separated_along_axis(const Vec3 (&diff)[N], int k, double thr) {
+PROXIMA_CCD_INLINE bool separated_along_axis(const Vec3 (&diff)[N], int k, double thr) {
     const double first = diff[0][k];
     if (first > thr) {
         for (int i = 1; i < N; ++i) {
@@ -607,10 +689,8 @@ bool separated_along_axis(const Vec3 (&diff)[N], int k, double thr) {
     return false;
 }
 
-}  // namespace
-
-bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
-                                  const ElementaryOptions& options) {
+PROXIMA_CCD_INLINE bool prefilter_body(CcdKind kind, const CcdPoints& points,
+                                       const ElementaryOptions& options) {
     double d = options.min_distance;
     if (std::isnan(d) || options.max_boxes == 0) {
         return false;  // the solver reports these unexamined
@@ -723,6 +803,35 @@ bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
         return true;
     }
     return b0 + e < -thr && b3 + e < -thr && s1 + e3 < -thr3 && s2 + e3 < -thr3;
+}
+
+// As the solver: a copy for AVX2 where the processor has it, the same operations in the same order.
+bool prefilter_portable(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
+    return prefilter_body(kind, points, options);
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2"))) bool prefilter_avx2(CcdKind kind, const CcdPoints& points,
+                                                    const ElementaryOptions& options) {
+    return prefilter_body(kind, points, options);
+}
+#endif
+
+}  // namespace
+
+bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
+                                  const ElementaryOptions& options) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    if (HAS_AVX2) {
+        return prefilter_avx2(kind, points, options);
+    }
+#endif
+    return prefilter_portable(kind, points, options);
+}
+
+bool elementary_prefilter_rejects_portable(CcdKind kind, const CcdPoints& points,
+                                           const ElementaryOptions& options) {
+    return prefilter_portable(kind, points, options);
 }
 
 CcdCornerValues elementary_corner_values(CcdKind kind, const CcdPoints& points,

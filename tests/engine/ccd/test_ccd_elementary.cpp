@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <random>
@@ -599,6 +600,87 @@ TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
     EXPECT_EQ(queries, 7279u);
     EXPECT_EQ(positives, 435u);
     EXPECT_EQ(false_negatives, 0u);
+}
+
+// `elementary` and `elementary_prefilter_rejects` may run copies compiled for AVX2 (chosen at run
+// time); they must give the portable copies' answers bit for bit: hit, toi, capped and the number
+// of regions examined (so the same regions, in the same order). Random queries near contact
+// (exact contacts, small gaps, motion in the plane), with the default options, a minimum distance,
+// a tighter tolerance and the direction exclusion off, then every public query.
+TEST(CcdElementary, DispatchedSolverEqualsPortable) {
+    std::vector<ElementaryOptions> variants(4);
+    variants[1].min_distance = 1e-3;
+    variants[2].tolerance = 1e-9;
+    variants[2].toi_tolerance = 0.0;
+    variants[3].direction_exclusion = false;
+    std::size_t compared = 0;
+    std::size_t hits = 0;
+    auto compare = [&](CcdKind kind, const CcdPoints& pts, const std::string& what) {
+        for (const auto& opt : variants) {
+            const auto a = elementary(kind, pts, opt);
+            const auto b = elementary_portable(kind, pts, opt);
+            ASSERT_EQ(a.hit, b.hit) << what;
+            ASSERT_EQ(a.capped, b.capped) << what;
+            ASSERT_EQ(a.boxes, b.boxes) << what;
+            ASSERT_EQ(std::memcmp(&a.toi, &b.toi, sizeof a.toi), 0)
+                << what << ": toi " << a.toi << " vs " << b.toi;
+            ASSERT_EQ(elementary_prefilter_rejects(kind, pts, opt),
+                      elementary_prefilter_rejects_portable(kind, pts, opt))
+                << what;
+            ++compared;
+            hits += a.hit ? 1 : 0;
+        }
+    };
+    std::mt19937_64 rng(2026);
+    std::uniform_real_distribution<double> coord(-1.0, 1.0);
+    std::uniform_real_distribution<double> small(-1e-3, 1e-3);
+    auto point = [&] { return Vec3{coord(rng), coord(rng), coord(rng)}; };
+    for (int i = 0; i < 1500; ++i) {
+        CcdPoints pts;
+        for (auto& p : pts) {
+            p = point();
+        }
+        const CcdKind kind = i % 2 == 0 ? VF : EE;
+        compare(kind, pts, "random " + std::to_string(i));
+        // Near contact: the first point ends (or starts) near a point of the other primitive.
+        const double a = std::uniform_real_distribution<double>(0.0, 0.5)(rng);
+        const double b = std::uniform_real_distribution<double>(0.0, 0.5)(rng);
+        const std::size_t end = i % 3 == 0 ? 0 : 4;
+        const Vec3 target = kind == VF ? pts[1 + end] + a * (pts[2 + end] - pts[1 + end]) +
+                                             b * (pts[3 + end] - pts[1 + end])
+                                       : pts[2 + end] + b * (pts[3 + end] - pts[2 + end]) -
+                                             a * (pts[1 + end] - pts[end]);
+        pts[end] = target + Vec3{small(rng), small(rng), small(rng)} * (i % 5 == 0 ? 0.0 : 1.0);
+        compare(kind, pts, "near " + std::to_string(i));
+        // Resting: the same positions at both ends, slightly perturbed.
+        for (std::size_t j = 0; j < 4; ++j) {
+            pts[j + 4] = pts[j] + Vec3{small(rng), small(rng), small(rng)} * 1e-3;
+        }
+        compare(kind, pts, "resting " + std::to_string(i));
+    }
+    EXPECT_EQ(compared, 1500u * 3u * variants.size());
+    EXPECT_GT(hits, 1000u);  // the comparison covers contacts, not only misses
+    const fs::path root = fs::path(PROXIMA_DATA_DIR) / "ccd-queries";
+    if (!fs::is_directory(root)) {
+        GTEST_SKIP() << "CCD benchmark data not found at " << root;
+    }
+    std::vector<fs::path> files;
+    for (const auto& e : fs::recursive_directory_iterator(root)) {
+        if (e.is_regular_file() && e.path().extension() == ".csv") {
+            files.push_back(e.path());
+        }
+    }
+    std::sort(files.begin(), files.end());
+    variants.resize(1);  // the public queries at the defaults (the others: cost)
+    for (const auto& file : files) {
+        const auto kind = ccd_kind_from_path(file.string());
+        ASSERT_TRUE(kind.has_value()) << file;
+        auto read = read_ccd_queries(file.string());
+        ASSERT_TRUE(read.ok()) << read.status().to_string();
+        for (std::size_t i = 0; i < read->size(); ++i) {
+            compare(*kind, read.value()[i].points, file.string() + " " + std::to_string(i));
+        }
+    }
 }
 
 }  // namespace

@@ -79,6 +79,15 @@ bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
 
 // --- Internals exposed for tests (the rounding-error bound is checked against exact arithmetic).
 
+// `elementary` compiled for baseline x86-64 only. On an x86-64 processor with AVX2, `elementary`
+// runs a copy of the solver compiled for AVX2 (chosen at run time), which must give the same
+// answer bit for bit (hit, toi, capped and boxes); this is the reference it is tested against.
+ElementaryResult elementary_portable(CcdKind kind, const CcdPoints& points,
+                                     const ElementaryOptions& options = {});
+// The same for `elementary_prefilter_rejects`.
+bool elementary_prefilter_rejects_portable(CcdKind kind, const CcdPoints& points,
+                                           const ElementaryOptions& options = {});
+
 // A region of the (t, u, v) domain: {t0, t1, u0, u1, v0, v1}.
 using CcdRegion = std::array<double, 6>;
 
