@@ -327,10 +327,10 @@ TEST(GeometryCache, PrefetchBuildsOnlyTheUpperLevels) {
     const auto s = cache.stats();
     EXPECT_EQ(s.prefetch_loads, 1u);
     // A whole tree has about n / 2 nodes (leaves of <= 4 triangles); the levels of nodes of more
-    // than PREFETCH_EXPAND_ABOVE triangles, 2 (n / PREFETCH_EXPAND_ABOVE) or so.
+    // than PREFETCH_EXPAND_ABOVE triangles, 2 (n / PREFETCH_EXPAND_ABOVE) or so. A fixed bound
+    // (not one derived from the constant): whole trees built again, by any route, fail here.
     EXPECT_GT(s.prefetch_nodes_built, 0u);
-    EXPECT_LE(s.prefetch_nodes_built, 4u * n / GeometryCache::PREFETCH_EXPAND_ABOVE + 2)
-        << "the prefetcher built more than the upper levels";
+    EXPECT_LE(s.prefetch_nodes_built, n / 32) << "the prefetcher built more than the upper levels";
     auto h = cache.get(store, 0);
     ASSERT_TRUE(h.ok());
     EXPECT_EQ(cache.stats().hits, 1u);
