@@ -62,7 +62,7 @@ class GeometryCache {
     // (every node of more than this many triangles); the levels below are built by the queries
     // that visit them, as for pieces a query loads itself. Building whole trees here cost half
     // the daemon's CPU under the review load (many pieces are evicted before a query walks most
-    // of their tree) and charged M several times the bytes of the nodes queries use.
+    // of their tree) and charged M for nodes no query used (docs/massive.md, docs/load.md).
     static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = 1024;
     explicit GeometryCache(std::uint64_t budget_bytes);
     ~GeometryCache();

@@ -62,8 +62,8 @@ class LazyBvh {
     std::uint64_t memory_bytes() const;
 
   private:
-    // Nodes are allocated (and charged to `bytes`) in blocks of this many: small
-    // enough that a tree built only near the queries is charged little more than what it holds.
+    // Nodes are allocated (and charged to `bytes`) in blocks of this many: small enough that a
+    // tree built only near the queries is charged little more than the nodes it holds.
     static constexpr std::uint32_t BLOCK = 128;
     Node& mutable_node(std::uint32_t i) { return m_blocks[i / BLOCK][i % BLOCK]; }
     std::uint32_t allocate_two();  // under m_mutex
