@@ -150,9 +150,11 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     lock.unlock();
     if (by_prefetch) {
         // §4.3: the prefetch phase also builds hierarchies ahead of the queries (the upper
-        // levels; the last ones stay lazy), after publishing the piece: a query that needs it
+        // levels only; the rest stays lazy), after publishing the piece: a query that needs it
         // meanwhile uses it at once (the tree is safe to expand from several threads).
-        handle->bvh.expand_above(PREFETCH_EXPAND_ABOVE);
+        const std::uint32_t built = handle->bvh.expand_above(PREFETCH_EXPAND_ABOVE);
+        std::lock_guard relock(m_mutex);
+        m_stats.prefetch_nodes_built += built;
     }
     return handle;
 }
@@ -241,6 +243,7 @@ CacheStats counters_since(const CacheStats& before, const CacheStats& after) {
     d.waits -= before.waits;
     d.loads -= before.loads;
     d.prefetch_loads -= before.prefetch_loads;
+    d.prefetch_nodes_built -= before.prefetch_nodes_built;
     d.triangles_loaded -= before.triangles_loaded;
     d.bytes_loaded -= before.bytes_loaded;
     d.evictions -= before.evictions;

@@ -33,12 +33,14 @@ LazyBvh::LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices
     root.count = static_cast<std::uint32_t>(triangles.size());
     set_box(root);
     if (m_bytes != nullptr) {
-        m_bytes->fetch_add(static_cast<std::int64_t>(m_order.size() * sizeof(std::uint32_t)),
+        m_bytes->fetch_add(static_cast<std::int64_t>(m_order.size() * sizeof(std::uint32_t) +
+                                                     m_blocks.size() * sizeof(m_blocks[0])),
                            std::memory_order_relaxed);
     }
 }
 
-void LazyBvh::expand_above(std::uint32_t count) {
+std::uint32_t LazyBvh::expand_above(std::uint32_t count) {
+    const std::uint32_t before = nodes_built();
     std::vector<const Node*> stack{&root()};
     while (!stack.empty()) {
         const Node* n = stack.back();
@@ -50,6 +52,7 @@ void LazyBvh::expand_above(std::uint32_t count) {
         stack.push_back(l);
         stack.push_back(r);
     }
+    return nodes_built() - before;
 }
 
 std::uint64_t LazyBvh::memory_bytes() const {

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <thread>
 
 #include "proxima/distance/bounds.hpp"
 #include "proxima/massive/avatar.hpp"
@@ -191,6 +192,155 @@ TEST(LazyBvh, ExpandsOnlyWhatIsVisited) {
     EXPECT_NEAR(std::sqrt(hit.squared_distance), 0.05, 1e-3);
     // A local query touches a small part of the tree (a full tree has ~4,000 nodes).
     EXPECT_LT(tb.nodes_built(), 600u) << "nodes built: " << tb.nodes_built();
+}
+
+namespace {
+
+// Every node of `a` and `b` below these two, expanding both as it goes: the same boxes, ranges,
+// smallest source triangles and triangle order (whatever order either tree was built in).
+void expect_same_subtree(LazyBvh& a, const LazyBvh::Node& na, LazyBvh& b, const LazyBvh::Node& nb,
+                         std::uint64_t& nodes) {
+    ++nodes;
+    ASSERT_EQ(na.first, nb.first);
+    ASSERT_EQ(na.count, nb.count);
+    ASSERT_EQ(na.min_source, nb.min_source);
+    ASSERT_EQ(na.box.lo, nb.box.lo);
+    ASSERT_EQ(na.box.hi, nb.box.hi);
+    if (na.leaf()) {
+        for (std::uint32_t s = na.first; s < na.first + na.count; ++s) {
+            ASSERT_EQ(a.triangle(s), b.triangle(s)) << "slot " << s;
+        }
+        return;
+    }
+    auto [a0, a1] = a.children(na);
+    auto [b0, b1] = b.children(nb);
+    expect_same_subtree(a, *a0, b, *b0, nodes);
+    expect_same_subtree(a, *a1, b, *b1, nodes);
+}
+
+}  // namespace
+
+// The prefetch thread builds only a hierarchy's upper levels and queries build the rest as they
+// visit it (several at once on one tree): every answer equals the one on a tree built whole up
+// front, bit for bit, and the trees end up identical.
+TEST(LazyBvh, PartialAndLazyTreesAnswerAsTheFullTree) {
+    const TriangleMesh big = sphere_mesh({0, 0, 0}, 1.0, 64);
+    const auto n = static_cast<std::uint32_t>(big.triangles.size());
+    std::vector<std::uint32_t> source(n);  // a permutation: reported ids differ from the tree's
+    for (std::uint32_t t = 0; t < n; ++t) {
+        source[t] = static_cast<std::uint32_t>((std::uint64_t(t) * 7919) % n);
+    }
+    LazyBvh full(big.vertices, big.triangles, nullptr, source);
+    LazyBvh upper(big.vertices, big.triangles, nullptr, source);
+    LazyBvh lazy(big.vertices, big.triangles, nullptr, source);
+    EXPECT_GT(full.expand_above(LazyBvh::LEAF_SIZE), n / 4);
+    const std::uint32_t upper_nodes = upper.expand_above(GeometryCache::PREFETCH_EXPAND_ABOVE);
+    EXPECT_GT(upper_nodes, 2u);
+    EXPECT_LT(upper_nodes, full.nodes_built() / 16) << "the upper levels are a small part";
+    EXPECT_EQ(lazy.nodes_built(), 2u);  // the root (and its spare)
+
+    // Probes: boxes around, across (touching: distance-0 ties) and inside the sphere's surface.
+    std::vector<TriangleMesh> probes;
+    for (int k = 0; k < 24; ++k) {
+        const double a = 0.5 * k;
+        const double r = 0.9 + 0.01 * (k % 7) * (k % 2 == 0 ? 1 : 2);
+        const Vec3 c{r * std::cos(a), r * std::sin(a), 0.3 * std::sin(2 * a)};
+        const double h = 0.02 + 0.01 * (k % 3);
+        probes.push_back(box_mesh(c - Vec3{h, h, h}, c + Vec3{h, h, h}, 0.2 * k));
+    }
+    const double slack = rounding_slack(2.0);
+    const std::vector<double> bounds{std::numeric_limits<double>::infinity(), 0.0, 0.05};
+    auto search = [&](LazyBvh& tree, std::size_t k, double bound) {
+        LazyBvh probe(probes[k].vertices, probes[k].triangles);
+        return closest_pair({&tree, &source}, {&probe, nullptr}, bound * bound, slack);
+    };
+    std::vector<PairHit> want;
+    for (std::size_t k = 0; k < probes.size(); ++k) {
+        for (double bound : bounds) {
+            want.push_back(search(full, k, bound));
+        }
+    }
+    // Four threads share the partial and the lazy tree, each probe's searches in another order.
+    std::vector<std::vector<PairHit>> got(4, std::vector<PairHit>(2 * want.size()));
+    std::vector<std::thread> threads;
+    for (std::size_t w = 0; w < got.size(); ++w) {
+        threads.emplace_back([&, w] {
+            for (std::size_t i = 0; i < probes.size(); ++i) {
+                const std::size_t k = (i * 5 + w * 7) % probes.size();
+                for (std::size_t b = 0; b < bounds.size(); ++b) {
+                    const std::size_t slot = k * bounds.size() + b;
+                    got[w][slot] = search(w % 2 == 0 ? lazy : upper, k, bounds[b]);
+                    got[w][want.size() + slot] = search(w % 2 == 0 ? upper : lazy, k, bounds[b]);
+                }
+            }
+        });
+    }
+    for (auto& t : threads) {
+        t.join();
+    }
+    std::size_t found = 0;
+    for (std::size_t w = 0; w < got.size(); ++w) {
+        for (std::size_t slot = 0; slot < got[w].size(); ++slot) {
+            const PairHit& g = got[w][slot];
+            const PairHit& e = want[slot % want.size()];
+            SCOPED_TRACE("thread " + std::to_string(w) + " search " + std::to_string(slot));
+            ASSERT_EQ(g.found, e.found);
+            EXPECT_EQ(g.squared_distance, e.squared_distance);
+            EXPECT_EQ(g.triangle_a, e.triangle_a);
+            EXPECT_EQ(g.triangle_b, e.triangle_b);
+            EXPECT_EQ(g.point_a, e.point_a);
+            EXPECT_EQ(g.point_b, e.point_b);
+            found += e.found ? 1 : 0;
+        }
+    }
+    EXPECT_GT(found, 0u);
+    EXPECT_LT(lazy.nodes_built(), full.nodes_built()) << "the local searches built the whole tree";
+    // Expanded the rest of the way, the three trees are the same tree.
+    std::uint64_t nodes = 0;
+    expect_same_subtree(full, full.root(), lazy, lazy.root(), nodes);
+    expect_same_subtree(full, full.root(), upper, upper.root(), nodes);
+    EXPECT_EQ(nodes, 2u * (full.nodes_built() - 1));
+    EXPECT_EQ(lazy.nodes_built(), full.nodes_built());
+    EXPECT_EQ(upper.nodes_built(), full.nodes_built());
+}
+
+// A prefetched piece gets only the upper levels of its hierarchy (the daemon's review load spent
+// half its CPU building whole trees of prefetched pieces): the prefetch_nodes_built counter
+// stays a small part of the full tree, and nodes queries build later are charged to M too.
+TEST(GeometryCache, PrefetchBuildsOnlyTheUpperLevels) {
+    const auto dir = temp_dir("prefetch-upper");
+    {
+        auto writer = StoreWriter::create(dir.string(), {});
+        ASSERT_TRUE(writer.ok());
+        ASSERT_TRUE((*writer)->add({"sphere", sphere_mesh({0, 0, 0}, 1.0, 64)}).ok());
+        ASSERT_TRUE((*writer)->commit().ok());
+    }
+    std::shared_ptr<const Store> store = *Store::open(dir.string());
+    ASSERT_EQ(store->pieces().size(), 1u);
+    const std::uint32_t n = store->pieces()[0].triangle_count;
+    ASSERT_GT(n, 8 * GeometryCache::PREFETCH_EXPAND_ABOVE);
+    GeometryCache cache(64u << 20);
+    cache.prefetch(store, {0});
+    for (int i = 0; i < 1000 && cache.stats().prefetch_nodes_built == 0; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    const auto s = cache.stats();
+    EXPECT_EQ(s.prefetch_loads, 1u);
+    // A whole tree has about n / 2 nodes (leaves of <= 4 triangles); the levels of nodes of more
+    // than PREFETCH_EXPAND_ABOVE triangles, 2 (n / PREFETCH_EXPAND_ABOVE) or so. A fixed bound
+    // (not one derived from the constant): whole trees built again, by any route, fail here.
+    EXPECT_GT(s.prefetch_nodes_built, 0u);
+    EXPECT_LE(s.prefetch_nodes_built, n / 32) << "the prefetcher built more than the upper levels";
+    auto h = cache.get(store, 0);
+    ASSERT_TRUE(h.ok());
+    EXPECT_EQ(cache.stats().hits, 1u);
+    const std::int64_t before = cache.stats().resident_bytes;
+    EXPECT_GT((*h)->bvh.expand_above(LazyBvh::LEAF_SIZE), n / 4);
+    const std::int64_t after = cache.stats().resident_bytes;
+    // The nodes a query builds are charged as they are built (n / 2 nodes of >= 40 bytes).
+    EXPECT_GE(after - before, static_cast<std::int64_t>(20 * n)) << before << " -> " << after;
+    EXPECT_EQ(cache.stats().prefetch_nodes_built, s.prefetch_nodes_built);
+    fs::remove_all(dir);
 }
 
 TEST(GeometryCache, StaysUnderBudgetKeepsPinsAndNeverCachesCorruption) {

@@ -42,6 +42,8 @@ struct CacheStats {
     std::uint64_t waits = 0;   // get() blocked on a load in progress
     std::uint64_t loads = 0;   // pieces read from disk (by get or prefetch)
     std::uint64_t prefetch_loads = 0;
+    // Hierarchy nodes built by the prefetch thread (GeometryCache::PREFETCH_EXPAND_ABOVE).
+    std::uint64_t prefetch_nodes_built = 0;
     std::uint64_t triangles_loaded = 0;
     std::uint64_t bytes_loaded = 0;  // piece record bytes read
     std::uint64_t evictions = 0;
@@ -56,9 +58,12 @@ CacheStats counters_since(const CacheStats& before, const CacheStats& after);
 // until handles are released (peak_bytes shows by how much).
 class GeometryCache {
   public:
-    // Prefetched pieces get their whole hierarchy built by the prefetch thread (a query then
-    // never pays for a first visit); pieces a query loads itself stay lazy.
-    static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = LazyBvh::LEAF_SIZE;
+    // Prefetched pieces get the upper levels of their hierarchy built by the prefetch thread
+    // (every node of more than this many triangles); the levels below are built by the queries
+    // that visit them, as for pieces a query loads itself. Building whole trees here cost half
+    // the daemon's CPU under the review load (many pieces are evicted before a query walks most
+    // of their tree) and charged M for nodes no query used (docs/massive.md, docs/load.md).
+    static constexpr std::uint32_t PREFETCH_EXPAND_ABOVE = 1024;
     explicit GeometryCache(std::uint64_t budget_bytes);
     ~GeometryCache();
     GeometryCache(const GeometryCache&) = delete;

@@ -55,13 +55,16 @@ class LazyBvh {
         const auto& tri = m_triangles[t];
         return {m_vertices[tri[0]], m_vertices[tri[1]], m_vertices[tri[2]]};
     }
-    // Builds every node holding more than `count` triangles (the prefetch thread's head start).
-    void expand_above(std::uint32_t count);
+    // Builds every node holding more than `count` triangles (the prefetch thread's head start);
+    // returns how many nodes the tree gained meanwhile (its own and any concurrent traversal's).
+    std::uint32_t expand_above(std::uint32_t count);
     std::uint32_t nodes_built() const { return m_count.load(std::memory_order_relaxed); }
     std::uint64_t memory_bytes() const;
 
   private:
-    static constexpr std::uint32_t BLOCK = 1024;
+    // Nodes are allocated (and charged to `bytes`) in blocks of this many: small enough that a
+    // tree built only near the queries is charged little more than the nodes it holds.
+    static constexpr std::uint32_t BLOCK = 128;
     Node& mutable_node(std::uint32_t i) { return m_blocks[i / BLOCK][i % BLOCK]; }
     std::uint32_t allocate_two();  // under m_mutex
     void set_box(Node& n);
