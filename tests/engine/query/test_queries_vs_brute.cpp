@@ -149,14 +149,18 @@ void expect_equal_answers(const Scene& scene, const QueryResult& bvh, const Quer
     EXPECT_EQ(bvh.stats.brute_force_tests, brute.stats.brute_force_tests) << where;
 }
 
-// 2,000 random scenes in four shards (separate ctest entries, so they run in parallel).
+// 2,000 random scenes in four shards (separate ctest entries, so they run in parallel). Under a
+// sanitizer (brute force ~3x slower, 90 s of the ASan stage for the four) the first 125 of each
+// shard: the same code paths with the same kinds of scenes; the release stage checks all 2,000
+// answers.
 class RandomScenes : public ::testing::TestWithParam<int> {};
 constexpr int SCENES_PER_SHARD = 500;
+constexpr int SCENES_RUN_PER_SHARD = test::SANITIZED ? 125 : SCENES_PER_SHARD;
 
 TEST_P(RandomScenes, AllQueriesEqualBruteForce) {
     int scenes = 0;
     const auto first = static_cast<std::uint64_t>(1 + GetParam() * SCENES_PER_SHARD);
-    for (std::uint64_t seed = first; seed < first + SCENES_PER_SHARD; ++seed) {
+    for (std::uint64_t seed = first; seed < first + SCENES_RUN_PER_SHARD; ++seed) {
         Rng rng(seed);
         ProximityEngine bvh;
         ProximityEngine brute;
@@ -176,7 +180,7 @@ TEST_P(RandomScenes, AllQueriesEqualBruteForce) {
             return;
         }
     }
-    EXPECT_EQ(scenes, SCENES_PER_SHARD);
+    EXPECT_EQ(scenes, SCENES_RUN_PER_SHARD);
 }
 INSTANTIATE_TEST_SUITE_P(QueriesVsBrute, RandomScenes, ::testing::Range(0, 4));
 
@@ -213,9 +217,12 @@ TEST(QueriesVsBrute, BruteForceMatchesNaiveLoops) {
 // with the brute culler it once counted each object pair of the separation query twice, so
 // exact_tests exceeded it): equal with the brute culler for every combination of queries, never
 // exceeded by another culler beyond the self query's seeding allowance (one test per triangle).
+// 40 scenes; under a sanitizer (45 s of the ASan stage) 10: every culler and every combination
+// of queries still runs on each, only fewer random scenes.
 TEST(QueriesVsBrute, TheBruteForceCountIsWhatBruteForceTests) {
     const CullerKind cullers[] = {CullerKind::brute, CullerKind::bvh, CullerKind::voronoi_cpu};
-    for (std::uint64_t seed = 20000; seed < 20040; ++seed) {
+    const std::uint64_t scenes = test::SANITIZED ? 10 : 40;
+    for (std::uint64_t seed = 20000; seed < 20000 + scenes; ++seed) {
         Rng rng(seed);
         const auto meshes = test::random_scene(rng);
         const double tol = test::uniform(rng, 0.0, 0.2);
@@ -263,8 +270,10 @@ TEST(QueriesVsBrute, TheBruteForceCountIsWhatBruteForceTests) {
 
 // Several frames of deformation through one engine (refitted hierarchies, coherent sort),
 // against a fresh brute force every frame; one frame replaces an object by two fragments.
+// 150 scenes; under a sanitizer (27 s of the ASan stage) 50, each with every kind of frame.
 TEST(QueriesVsBrute, DeformingFramesAndTopologyChange) {
-    for (std::uint64_t seed = 20000; seed < 20150; ++seed) {
+    const std::uint64_t scenes = test::SANITIZED ? 50 : 150;
+    for (std::uint64_t seed = 20000; seed < 20000 + scenes; ++seed) {
         Rng rng(seed);
         ProximityEngine bvh;
         for (const auto& m : test::random_scene(rng)) {
