@@ -61,7 +61,18 @@ double plane_lower_bound(const Triangle& a, const Triangle& b, double slack);
 // sheet (the usual intra-object case).
 double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
-// The larger of the two bounds above.
+// In-plane edge bound: for each edge of either triangle, the gap along the direction in that
+// triangle's plane perpendicular to the edge, away from the triangle. Strong where the centroid
+// axis is oblique to the gap: 2-ring neighbours of a sheet, which face each other across an edge
+// of a triangle between them. Never above the computed distance by more than its rounding slack.
+double edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
+
+// The edge, plane and axis bounds in turn (most pruning first), stopping at the first whose
+// square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
+// its square reaches the threshold; a positive value also proves the triangles disjoint.
+double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
+
+// The larger of the plane and axis bounds.
 inline double triangle_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     return std::max(plane_lower_bound(a, b, slack), axis_lower_bound(a, b, slack));
 }
