@@ -67,7 +67,7 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
 // of a triangle between them. Never above the computed distance by more than its rounding slack.
 double edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
-// The edge, plane and axis bounds in turn (most pruning first), stopping at the first whose
+// The plane, edge and axis bounds in turn (cheapest first), stopping at the first whose
 // square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
 // its square reaches the threshold; a positive value also proves the triangles disjoint.
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
