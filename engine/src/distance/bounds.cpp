@@ -69,32 +69,53 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     return lb > 0.0 ? lb : 0.0;
 }
 
-namespace {
-
-// The gap between b and the outside of a's edges, measured in a's plane: for each edge, the
-// direction in a's plane perpendicular to it, pointing away from the opposite corner. Any
-// direction gives a valid bound (the projections' gap), so the direction's rounding costs
-// nothing; a's own extent along it is taken from all three corners, not assumed zero at the edge.
-double edge_side(const Triangle& a, const Triangle& b) {
+EdgeFrame edge_frame(const Triangle& a) {
+    // Any direction gives a valid bound (the projections' gap), so the rounding of the normal,
+    // of the in-plane directions and of their normalisation costs nothing; a's own extent along
+    // each is taken from all three corners, not assumed zero at the edge.
+    EdgeFrame f;
     const Vec3 n = cross(a[1] - a[0], a[2] - a[0]);
-    const Vec3 cb = b[0] + b[1] + b[2];  // three times b's centroid
-    double best = 0.0;
     for (int i = 0; i < 3; ++i) {
         const Vec3& p = a[i];
         const Vec3& q = a[i == 2 ? 0 : i + 1];
         const Vec3& r = a[i == 0 ? 2 : i - 1];
         const Vec3 m = cross(q - p, n);
-        // b's lowest corner along m is at most its centroid: an edge whose line has b's centroid
-        // behind it (or on it) gives no positive gap.
-        if (!(dot(m, cb - 3.0 * p) > 0.0)) {
+        const double len = norm(m);
+        if (!(len > 0.0)) {
+            f.normal[i] = Vec3{0.0, 0.0, 0.0};
+            f.extent[i] = 0.0;  // b's gap along a zero direction is 0: never positive
             continue;
         }
-        const double a_max = std::max({0.0, dot(m, q - p), dot(m, r - p)});
-        const double b_min = std::min({dot(m, b[0] - p), dot(m, b[1] - p), dot(m, b[2] - p)});
-        const double gap = b_min - a_max;
-        if (gap > 0.0) {
-            best = std::max(best, gap / norm(m));
+        f.normal[i] = (1.0 / len) * m;
+        f.extent[i] = std::max({0.0, dot(f.normal[i], q - p), dot(f.normal[i], r - p)});
+    }
+    return f;
+}
+
+namespace {
+
+// The gap between b and the outside of a's edges, along a's in-plane edge normals.
+double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
+    double best = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const Vec3& m = fa.normal[i];
+        const Vec3& p = a[i];
+        const double floor = std::max(best, 0.0) + fa.extent[i];
+        // b's lowest corner must clear a's extent (and the best gap so far): stop at the first
+        // corner that does not.
+        const double d0 = dot(m, b[0] - p);
+        if (!(d0 > floor)) {
+            continue;
         }
+        const double d1 = dot(m, b[1] - p);
+        if (!(d1 > floor)) {
+            continue;
+        }
+        const double d2 = dot(m, b[2] - p);
+        if (!(d2 > floor)) {
+            continue;
+        }
+        best = std::min({d0, d1, d2}) - fa.extent[i];
     }
     return best;
 }
@@ -115,35 +136,45 @@ double reach_from(const Vec3& origin, const Triangle& a, const Triangle& b) {
 
 }  // namespace
 
-double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                        const EdgeFrame& fb, double slack) {
     // Where a's edge normals point away from b the gap is negative, so only edges facing b
     // count; both triangles' edges are tried.
-    const double ab = edge_side(a, b);
-    const double ba = edge_side(b, a);
+    const double ab = edge_side(a, fa, b);
+    const double ba = edge_side(b, fb, a);
     const double gap = std::max(ab, ba);
     if (!(gap > 0.0)) {
         return 0.0;
     }
     const double reach = ab >= ba ? reach_from(a[0], a, b) : reach_from(b[0], b, a);
     // Same error model as axis_lower_bound: differences and dot products relative to the
-    // extent involved; the division by the direction's length is exact up to one rounding.
+    // extent involved, and a direction of length 1 within a few ulps.
     const double lb = gap - 64.0 * std::numeric_limits<double>::epsilon() * reach - slack;
     return lb > 0.0 ? lb : 0.0;
 }
 
-double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {
+double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    return edge_lower_bound(a, edge_frame(a), b, edge_frame(b), slack);
+}
+
+double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                         const EdgeFrame& fb, double slack, double threshold_sq) {
     // Cheapest first (docs/benchmarks.md, "In-plane edge bound"): the plane bound prunes 43-55 %
-    // of the self search's candidates on rod-twist and cloth-ball, the edge bound (about twice
-    // its cost) most of the rest, the axis bound 0.3-5 % more.
+    // of the self search's candidates on rod-twist and cloth-ball, the edge bound most of the
+    // rest, the axis bound 0.3-5 % more.
     double lb = plane_lower_bound(a, b, slack);
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    lb = std::max(lb, edge_lower_bound(a, b, slack));
+    lb = std::max(lb, edge_lower_bound(a, fa, b, fb, slack));
     if (lb * lb >= threshold_sq) {
         return lb;
     }
     return std::max(lb, axis_lower_bound(a, b, slack));
+}
+
+double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {
+    return lower_bound_until(a, edge_frame(a), b, edge_frame(b), slack, threshold_sq);
 }
 
 double plane_lower_bound(const Triangle& a, const Triangle& b, double slack) {
