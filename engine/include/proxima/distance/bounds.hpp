@@ -79,7 +79,7 @@ EdgeFrame edge_frame(const Triangle& a);
 double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                         const EdgeFrame& fb, double slack);
 
-// The plane, edge and axis bounds in turn (cheapest first), stopping at the first whose
+// The edge, plane and axis bounds in turn, stopping at the first whose
 // square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
 // its square reaches the threshold; a positive value also proves the triangles disjoint.
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
