@@ -569,7 +569,7 @@ inline void edge_parameters(const Segment& sp, double inv_a, const Segment& sq, 
 
 }  // namespace
 
-ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb) {
+ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apart) {
     // triangles_intersect, inlined so that its exact plane signs and the heights computed along
     // the way also serve the vertex-over-face shortcut below.
     const detail::PlaneSide side_a(ta[0], ta[1], ta[2]);
@@ -585,7 +585,7 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb) {
                            side_b(ta[2], height_a[2])};
         a_one_side = strictly_one_side(sa);
         Vec3 witness;
-        if (!a_one_side && intersect_after_planes(ta, tb, sa, sb, &witness)) {
+        if (!a_one_side && !apart && intersect_after_planes(ta, tb, sa, sb, &witness)) {
             return {0.0, witness, witness};
         }
     }

@@ -385,9 +385,12 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         const double slack = rounding_slack(coordinate_scale(obj.box));
         SelfBests bests(result.self[a]);
         std::atomic<std::uint64_t> tests{0};
+        // Each triangle's edge-bound frame, once per query (filled below when culling).
+        std::vector<EdgeFrame> frames;
 
         // Exact test of one pair, skipped when a cheap lower bound shows it cannot beat (or tie)
-        // either triangle's current best.
+        // either triangle's current best. A positive bound also proves the pair disjoint, which
+        // spares the exact test its intersection search (same result, bit for bit).
         // The distance is computed with the smaller index first, as brute force does, so the
         // value is bit-identical whichever way a seed or a traversal proposes the pair.
         auto test = [&](std::uint32_t t, std::uint32_t u, const Triangle& tx,
@@ -399,17 +402,19 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             if (swapped) {
                 std::swap(t, u);
             }
+            double lb = 0.0;
             if (cull) {
                 const double bound = std::max(bests.bound(t), bests.bound(u));
                 if (std::isfinite(bound)) {
-                    const double lb = triangle_lower_bound(x, y, slack);
-                    if (lb * lb >= cull_threshold_sq(bound, slack)) {
+                    const double th = cull_threshold_sq(bound, slack);
+                    lb = lower_bound_until(x, frames[t], y, frames[u], slack, th);
+                    if (lb * lb >= th) {
                         return;
                     }
                 }
             }
             ++count;
-            const auto cp = triangle_triangle(x, y);
+            const auto cp = triangle_triangle(x, y, lb > 0.0);
             bests.offer(t, u, cp.squared_distance, cp.point_a, cp.point_b);
             bests.offer(u, t, cp.squared_distance, cp.point_b, cp.point_a);
         };
@@ -424,11 +429,13 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // once.
             std::vector<Vec3> centroid(nt);
             std::vector<std::uint32_t> seed(nt, UINT32_MAX);
+            frames.resize(nt);
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
                                   for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
                                       const Triangle x = corners(obj, t);
                                       centroid[t] = (x[0] + x[1] + x[2]) / 3.0;
+                                      frames[t] = edge_frame(x);
                                   }
                               });
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),

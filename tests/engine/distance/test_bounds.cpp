@@ -1,12 +1,14 @@
 // The triangle lower bounds (proxima/distance/bounds.hpp) directly: never above the computed exact
 // distance they stand in for (random pairs at several scales, touching and near-touching pairs,
 // slivers), tight where each is meant to be strong (parallel planes for the plane bound,
-// neighbours of one flat sheet for the axis bound), zero for intersecting triangles; and the
+// neighbours of one flat sheet for the axis bound, neighbours across a triangle between them for
+// the edge bound), zero for intersecting triangles; and the
 // threshold helpers the searches compare against.
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "proxima/distance/bounds.hpp"
@@ -53,10 +55,28 @@ TEST(TriangleLowerBounds, NeverAboveTheComputedDistance) {
             const double exact = exact_distance(a, b);
             const double plane = plane_lower_bound(a, b, slack);
             const double axis = axis_lower_bound(a, b, slack);
+            const double edge = edge_lower_bound(a, b, slack);
             ASSERT_LE(plane, exact) << "scale " << scale << " pair " << i;
             ASSERT_LE(axis, exact) << "scale " << scale << " pair " << i;
+            ASSERT_LE(edge, exact) << "scale " << scale << " pair " << i;
             ASSERT_GE(plane, 0.0);
             ASSERT_GE(axis, 0.0);
+            ASSERT_GE(edge, 0.0);
+            // Without a threshold to stop at, the early-out evaluation gives the strongest bound.
+            const double lb = std::max({plane, axis, edge});
+            ASSERT_EQ(lower_bound_until(a, b, slack, std::numeric_limits<double>::infinity()), lb);
+            if (lb > 0.0) {
+                const double below = lb * lb * (1.0 - 1e-12);
+                const double reached = lower_bound_until(a, b, slack, below);
+                ASSERT_GE(reached * reached, below);
+                // A positive bound proves the pair disjoint: the exact test told so gives the
+                // same answer, bit for bit.
+                const auto full = triangle_triangle(a, b);
+                const auto told = triangle_triangle(a, b, true);
+                ASSERT_EQ(full.squared_distance, told.squared_distance);
+                ASSERT_EQ(full.point_a, told.point_a);
+                ASSERT_EQ(full.point_b, told.point_b);
+            }
             ASSERT_EQ(triangle_lower_bound(a, b, slack), std::max(plane, axis));
             separated += exact > 0.0 && triangle_lower_bound(a, b, slack) > 0.0 ? 1 : 0;
         }
@@ -82,6 +102,39 @@ TEST(TriangleLowerBounds, NearTouchingPairsStayBelowTheComputedDistance) {
         const double exact = exact_distance(a, b);
         ASSERT_LE(plane_lower_bound(a, b, slack), exact) << "gap " << gap;
         ASSERT_LE(axis_lower_bound(a, b, slack), exact) << "gap " << gap;
+        ASSERT_LE(edge_lower_bound(a, b, slack), exact) << "gap " << gap;
+    }
+}
+
+TEST(TriangleLowerBounds, EdgeBoundIsTightAcrossATriangleBetweenNeighbours) {
+    // Two coplanar triangles of a sheet facing each other across a gap perpendicular to a's edge
+    // (1,0,0)-(1,1,0): the centroid axis is oblique to the gap, the edge's in-plane normal is
+    // along it, so the edge bound is the tight one. Gaps down to 2^-49 keep it below the
+    // computed distance.
+    const Triangle a{Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{1, 1, 0}};
+    for (int k = 0; k < 50; ++k) {
+        const double gap = std::ldexp(1.0, -k);  // 1 down to 2^-49
+        const Triangle b{Vec3{1 + gap, 0, 0}, Vec3{2 + gap, 1, 0}, Vec3{1 + gap, 1, 0}};
+        const double slack = slack_of(a, b);
+        const double exact = exact_distance(a, b);
+        ASSERT_DOUBLE_EQ(exact, gap);
+        const double edge = edge_lower_bound(a, b, slack);
+        ASSERT_LE(edge, exact) << "gap " << gap;
+        if (k < 20) {
+            EXPECT_NEAR(edge, gap, 1e-9) << "gap " << gap;
+            EXPECT_LT(axis_lower_bound(a, b, slack), 0.9 * gap) << "gap " << gap;
+        }
+    }
+    // Sheared and slightly out of plane copies beside that edge: no edge normal points straight
+    // at b; still never above the distance.
+    std::mt19937_64 rng(31);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < 2000; ++i) {
+        const Vec3 shift{1.0 + 0.5 * std::abs(u(rng)), u(rng), 1e-3 * u(rng)};
+        const Triangle b{a[0] + shift, a[1] + shift + Vec3{0, 0.3 * u(rng), 0}, a[2] + shift};
+        const double slack = slack_of(a, b);
+        ASSERT_LE(edge_lower_bound(a, b, slack), exact_distance(a, b)) << "pair " << i;
+        ASSERT_LE(edge_lower_bound(b, a, slack), exact_distance(a, b)) << "pair " << i;
     }
 }
 
@@ -119,6 +172,8 @@ TEST(TriangleLowerBounds, IntersectingAndTouchingTrianglesGetZero) {
         EXPECT_EQ(exact_distance(a, b), 0.0);
         EXPECT_EQ(plane_lower_bound(a, b, slack), 0.0);
         EXPECT_EQ(axis_lower_bound(a, b, slack), 0.0);
+        EXPECT_EQ(edge_lower_bound(a, b, slack), 0.0);
+        EXPECT_EQ(lower_bound_until(a, b, slack, 1e-30), 0.0);
     }
 }
 
@@ -136,6 +191,8 @@ TEST(TriangleLowerBounds, SliversAreNeverTrustedAboveTheDistance) {
         ASSERT_LE(plane_lower_bound(sliver, other, slack), exact);
         ASSERT_LE(plane_lower_bound(other, sliver, slack), exact);
         ASSERT_LE(axis_lower_bound(sliver, other, slack), exact);
+        ASSERT_LE(edge_lower_bound(sliver, other, slack), exact);
+        ASSERT_LE(edge_lower_bound(other, sliver, slack), exact);
     }
 }
 

@@ -61,7 +61,32 @@ double plane_lower_bound(const Triangle& a, const Triangle& b, double slack);
 // sheet (the usual intra-object case).
 double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
-// The larger of the two bounds above.
+// In-plane edge bound: for each edge of either triangle, the gap along the direction in that
+// triangle's plane perpendicular to the edge, away from the triangle. Strong where the centroid
+// axis is oblique to the gap: 2-ring neighbours of a sheet, which face each other across an edge
+// of a triangle between them. Never above the computed distance by more than its rounding slack.
+double edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
+
+// What the edge bound needs of one triangle alone, so that a search can compute it once per
+// triangle rather than once per pair: each edge's unit in-plane normal (away from the third
+// corner) and the triangle's extent beyond the edge along it (0 up to rounding).
+struct EdgeFrame {
+    Vec3 normal[3];
+    double extent[3];
+};
+EdgeFrame edge_frame(const Triangle& a);
+// The same bound from frames made by edge_frame(a) and edge_frame(b).
+double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                        const EdgeFrame& fb, double slack);
+
+// The edge, plane and axis bounds in turn, stopping at the first whose
+// square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
+// its square reaches the threshold; a positive value also proves the triangles disjoint.
+double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
+double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                         const EdgeFrame& fb, double slack, double threshold_sq);
+
+// The larger of the plane and axis bounds.
 inline double triangle_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     return std::max(plane_lower_bound(a, b, slack), axis_lower_bound(a, b, slack));
 }
