@@ -29,7 +29,8 @@
 //           then again from the start.
 // --rate FPS paces each sim, frames and review client (open loop: a call's latency runs from the
 // moment it was due, so a slow daemon is not hidden by the client waiting for it); 0 is closed
-// loop.
+// loop. Paced clients start at evenly spread phases of the period, so the daemon sees an evenly
+// spaced aggregate rate (as ghz's --rps), not every client's call at the same instant.
 
 #include <netdb.h>
 #include <sys/resource.h>
@@ -499,9 +500,17 @@ class Recorder {
 };
 
 // Paces a client: closed loop (rate 0) returns now; open loop the next due time, waiting for it.
+// Calls at `rate` per second from now + phase / rate (phase in [0, 1)): the run gives each paced
+// client its own phase, so N clients at rate r send an evenly spaced N * r calls per second (as
+// ghz's --rps does), not N calls at once every 1/r seconds.
 class Pacer {
   public:
-    Pacer(Shared& shared, double rate) : m_shared(shared), m_rate(rate), m_t0(Clock::now()) {}
+    Pacer(Shared& shared, double rate, double phase)
+        : m_shared(shared),
+          m_rate(rate),
+          m_t0(Clock::now() + (rate > 0 ? std::chrono::duration_cast<Clock::duration>(
+                                              std::chrono::duration<double>(phase / rate))
+                                        : Clock::duration::zero())) {}
     std::optional<Clock::time_point> next() {
         if (m_rate <= 0) {
             return m_shared.stop.load() ? std::nullopt : std::optional(Clock::now());
@@ -535,7 +544,8 @@ StatusOr<std::unique_ptr<client::Client>> connect_client(Shared& shared,
     return client::Client::connect(server, shared.options);
 }
 
-void run_sim(Shared& shared, Recorder& rec, const std::string& server, std::size_t index) {
+void run_sim(Shared& shared, Recorder& rec, const std::string& server, std::size_t index,
+             double phase) {
     auto c = connect_client(shared, server);
     while (!c.ok() && rec.running()) {
         rec.record(sim_scene, Clock::now(), c.status());
@@ -546,7 +556,7 @@ void run_sim(Shared& shared, Recorder& rec, const std::string& server, std::size
         return;
     }
     const auto& scene_name = shared.scenes[index % shared.scenes.size()];
-    Pacer pacer(shared, shared.args->rate);
+    Pacer pacer(shared, shared.args->rate, phase);
     while (rec.running()) {
         auto scene = scenes::by_name(scene_name, shared.args->episode_frames);
         auto opened = c.value()->open_stream("");
@@ -682,7 +692,8 @@ StatusOr<std::vector<LoadedPair>> load_pairs(const std::vector<std::string>& dir
 
 // One scene of a real frame pair (CreateScene with the t0 objects: pair_scene), then frames over
 // one stream moving every vertex to t1, back to t0, and so on (pair_frame), with the --queries.
-void run_pair(Shared& shared, Recorder& rec, const std::string& server, const LoadedPair& pair) {
+void run_pair(Shared& shared, Recorder& rec, const std::string& server, const LoadedPair& pair,
+              double phase) {
     auto c = connect_client(shared, server);
     while (!c.ok() && rec.running()) {
         rec.record(pair_scene, Clock::now(), c.status());
@@ -696,7 +707,7 @@ void run_pair(Shared& shared, Recorder& rec, const std::string& server, const Lo
     for (const auto& o : pair.frames.objects) {
         meshes.push_back(o.mesh);
     }
-    Pacer pacer(shared, shared.args->rate);
+    Pacer pacer(shared, shared.args->rate, phase);
     while (rec.running()) {
         const auto created_at = Clock::now();
         auto scene = c.value()->create_scene("proxima load", meshes);
@@ -830,7 +841,7 @@ massive::Affine review_pose_at(const ModelInfo& model, std::size_t index, std::s
 }
 
 void run_review(Shared& shared, Recorder& rec, const std::string& server, const ModelInfo& model,
-                std::size_t index, std::size_t count) {
+                std::size_t index, std::size_t count, double phase) {
     const auto wait = std::chrono::seconds(10);
     auto c = connect_client(shared, server);
     while (!c.ok() && rec.running()) {
@@ -850,7 +861,7 @@ void run_review(Shared& shared, Recorder& rec, const std::string& server, const 
     join.tolerance = shared.args->tolerance;
     join.nearest = true;
     const bool editor = shared.args->edit_every > 0 && index % 2 == 1 && model.objects > 0;
-    Pacer pacer(shared, shared.args->rate);
+    Pacer pacer(shared, shared.args->rate, phase);
     std::uint64_t step = 0;
     std::uint64_t edits = 0;
     while (rec.running()) {
@@ -1530,13 +1541,16 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
     auto spawn = [&](auto body) {
         recorders.push_back(std::make_unique<Recorder>(sh));
         Recorder* rec = recorders.back().get();
+        // Paced clients start at evenly spread phases of the --rate period (Pacer).
+        const double phase = static_cast<double>(next) /
+                             static_cast<double>(std::max<std::size_t>(1, clients.total()));
         const std::size_t server = next++ % args.servers.size();
         {
             std::lock_guard lock(sh.mu);
             ++sh.running;
         }
-        threads.emplace_back([body, rec, server, &sh] {
-            body(*rec, server);
+        threads.emplace_back([body, rec, server, phase, &sh] {
+            body(*rec, server, phase);
             {
                 std::lock_guard lock(sh.mu);
                 --sh.running;
@@ -1545,28 +1559,28 @@ int run_load(const CLI::App& command, const LoadArgs& args) {
         });
     };
     for (std::size_t i = 0; i < clients.sim; ++i) {
-        spawn([&sh, &args, i](Recorder& rec, std::size_t server) {
-            run_sim(sh, rec, args.servers[server], i);
+        spawn([&sh, &args, i](Recorder& rec, std::size_t server, double phase) {
+            run_sim(sh, rec, args.servers[server], i, phase);
         });
     }
     for (std::size_t i = 0; i < clients.frames; ++i) {
-        spawn([&sh, &args, &pairs, i](Recorder& rec, std::size_t server) {
-            run_pair(sh, rec, args.servers[server], pairs[i % pairs.size()]);
+        spawn([&sh, &args, &pairs, i](Recorder& rec, std::size_t server, double phase) {
+            run_pair(sh, rec, args.servers[server], pairs[i % pairs.size()], phase);
         });
     }
     for (std::size_t i = 0; i < clients.review; ++i) {
         const std::size_t count = clients.review;
-        spawn([&sh, &args, &models, i, count](Recorder& rec, std::size_t server) {
-            run_review(sh, rec, args.servers[server], models[server], i, count);
+        spawn([&sh, &args, &models, i, count](Recorder& rec, std::size_t server, double phase) {
+            run_review(sh, rec, args.servers[server], models[server], i, count, phase);
         });
     }
     for (std::size_t i = 0; i < clients.verify; ++i) {
-        spawn([&sh, &args, &models](Recorder& rec, std::size_t server) {
+        spawn([&sh, &args, &models](Recorder& rec, std::size_t server, double /*phase*/) {
             run_verify(sh, rec, args.servers[server], models[server]);
         });
     }
     for (std::size_t i = 0; i < clients.play; ++i) {
-        spawn([&sh, &args, &sequences, i](Recorder& rec, std::size_t server) {
+        spawn([&sh, &args, &sequences, i](Recorder& rec, std::size_t server, double /*phase*/) {
             run_play(sh, rec, args.servers[server], sequences[i % sequences.size()]);
         });
     }

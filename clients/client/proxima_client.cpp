@@ -986,10 +986,12 @@ StatusOr<RegionSummary> Client::fetch_region(
     return *summary;
 }
 
-// A reader thread moves events from the stream into `events` (at most MAX_QUEUED; past that it
-// waits for next(), so the daemon's flow control and bounds apply rather than this queue
-// growing). Writes happen on the caller's thread under `write_mu`, which the reader also takes
-// for Finish (gRPC wants no write in progress while Finish runs).
+// A reader thread moves events from the stream into `events`: at most MAX_QUEUED ordered events
+// (past that it waits for next(), so the daemon's flow control and bounds apply rather than this
+// queue growing) and at most one update per peer (a newer one replaces it, as in the daemon's
+// outbox: the reader keeps reading, so a member's own answers never queue behind peer updates).
+// Writes happen on the caller's thread under `write_mu`, which the reader also takes for Finish
+// (gRPC wants no write in progress while Finish runs).
 struct ReviewSession::Impl {
     static constexpr std::size_t MAX_QUEUED = 64;
 
@@ -1006,8 +1008,11 @@ struct ReviewSession::Impl {
     std::mutex mu;
     std::condition_variable changed;
     std::deque<StatusOr<ReviewEvent>> events;  // guarded by mu
-    bool ended = false;                        // guarded by mu: Finish has returned
-    bool discard = false;                      // guarded by mu: drop events (finishing)
+    // guarded by mu: how many of `events` are not peer updates (only those count against
+    // MAX_QUEUED: peer updates coalesce, at most one per peer)
+    std::size_t ordered = 0;
+    bool ended = false;    // guarded by mu: Finish has returned
+    bool discard = false;  // guarded by mu: drop events (finishing)
     // guarded by mu: wait_result is waiting for a result; other events need not wake it (with
     // many room members most events are peer updates, and waking the caller for each one cost
     // more than the rest of the client: it takes them all, in order, when the result comes)
@@ -1019,13 +1024,34 @@ struct ReviewSession::Impl {
         pb::ReviewEvent event;
         while (stream->Read(&event)) {
             auto decoded = detail::decode_review_event(event);
+            const bool peer = decoded.ok() && decoded->kind == ReviewEvent::Kind::peer;
             std::unique_lock lock(mu);
-            changed.wait(lock, [&] { return discard || events.size() < MAX_QUEUED; });
+            if (peer) {
+                // As the daemon's outbox does: a peer's update not yet taken is replaced by the
+                // newer one, at the end. So the reader never stops for peer updates, and the
+                // member's own answers never wait behind a backlog of them in the transport.
+                if (!discard) {
+                    const auto stale = std::find_if(events.begin(), events.end(), [&](auto& e) {
+                        return e.ok() && e->kind == ReviewEvent::Kind::peer &&
+                               e->peer.member == decoded->peer.member;
+                    });
+                    if (stale != events.end()) {
+                        events.erase(stale);
+                    }
+                    events.push_back(std::move(decoded));
+                    if (!result_only) {
+                        changed.notify_all();
+                    }
+                }
+                continue;
+            }
+            changed.wait(lock, [&] { return discard || ordered < MAX_QUEUED; });
             if (!discard) {
                 const bool wake = !result_only || !decoded.ok() ||
                                   decoded->kind == ReviewEvent::Kind::result ||
-                                  events.size() + 1 >= MAX_QUEUED;
+                                  ordered + 1 >= MAX_QUEUED;
                 events.push_back(std::move(decoded));
+                ++ordered;
                 if (wake) {
                     changed.notify_all();
                 }
@@ -1062,6 +1088,17 @@ struct ReviewSession::Impl {
         return {StatusCode::failed_precondition,
                 ended ? "the review stream has ended"
                       : "the review stream is ending (next() returns its final status)"};
+    }
+
+    // The oldest event (events not empty; mu held).
+    StatusOr<ReviewEvent> pop_locked() {
+        auto event = std::move(events.front());
+        events.pop_front();
+        if (!(event.ok() && event->kind == ReviewEvent::Kind::peer)) {
+            --ordered;
+        }
+        changed.notify_all();  // the reader may wait for room in the queue
+        return event;
     }
 
     void stop_reader() {
@@ -1176,10 +1213,7 @@ StatusOr<ReviewEvent> ReviewSession::next(std::chrono::milliseconds timeout) {
                       "no review event within " + std::to_string(timeout.count()) + " ms");
     }
     if (!s.events.empty()) {
-        auto event = std::move(s.events.front());
-        s.events.pop_front();
-        s.changed.notify_all();
-        return event;
+        return s.pop_locked();
     }
     return s.final_status.ok()
                ? Status(StatusCode::failed_precondition, "the review stream has ended")
@@ -1207,9 +1241,7 @@ StatusOr<ReviewPoseResult> ReviewSession::wait_result(
                        ? Status(StatusCode::failed_precondition, "the review stream has ended")
                        : s.final_status;
         }
-        auto event = std::move(s.events.front());
-        s.events.pop_front();
-        s.changed.notify_all();  // the reader may wait for room in the queue
+        auto event = s.pop_locked();
         if (!event.ok()) {
             s.result_only = false;
             return event.status();
@@ -1239,6 +1271,7 @@ Status ReviewSession::finish() {
         std::lock_guard lock(s.mu);
         s.discard = true;
         s.events.clear();
+        s.ordered = 0;
         s.changed.notify_all();
     }
     s.stop_reader();

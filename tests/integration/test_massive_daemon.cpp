@@ -769,6 +769,82 @@ TEST_F(MassiveDaemon, CorruptChunkIsDataLossAndTheDaemonServesOn) {
     fs::remove_all(models, ec);
 }
 
+// A member busy elsewhere (not reading its session for a while) while three peers walk: its
+// session keeps reading and keeps at most one update per peer (the newest), so when it poses,
+// its own answer comes after at most those few updates, not behind a backlog of every peer
+// pose the room published meanwhile; and each peer's last pose still reaches it.
+TEST_F(MassiveDaemon, ReviewSessionCoalescesPeerUpdatesWhileItsCallerIsBusy) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    const std::vector<std::string> names{"watcher", "p0", "p1", "p2"};
+    std::map<std::string, std::unique_ptr<client::ReviewSession>> members;
+    for (const auto& name : names) {
+        auto session = c->join_review({"busy-1", "plant", name, avatar, 0.2, true});
+        ASSERT_TRUE(session.ok()) << session.status().to_string();
+        members[name] = std::move(session).value();
+    }
+    // The peers walk, 150 poses each, while the watcher reads nothing.
+    constexpr std::uint64_t POSES = 150;
+    for (std::uint64_t k = 1; k <= POSES; ++k) {
+        for (std::size_t p = 1; p < names.size(); ++p) {
+            const double x = -0.5 + 0.08 * static_cast<double>(k);
+            ASSERT_TRUE(members[names[p]]
+                            ->send_pose(k, translation(x, 2.0 * static_cast<double>(p), 0.5))
+                            .ok());
+            auto got = members[names[p]]->wait_result(k, {});
+            ASSERT_TRUE(got.ok()) << got.status().to_string();
+        }
+    }
+    // 3 x 150 peer poses were published to the watcher. Its answer comes after its queued
+    // events: the member_joined events and at most one update per peer (two for a peer whose
+    // last publish raced the watcher's reading).
+    auto& watcher = *members["watcher"];
+    ASSERT_TRUE(watcher.send_pose(1, translation(30.0, 30.0, 0.5)).ok());
+    std::map<std::string, std::vector<std::uint64_t>> seen;
+    std::size_t joins = 0;
+    for (;;) {
+        auto e = watcher.next(10s);
+        ASSERT_TRUE(e.ok()) << e.status().to_string();
+        if (e->kind == ReviewEvent::Kind::result) {
+            EXPECT_EQ(e->result.sequence, 1u);
+            break;
+        }
+        if (e->kind == ReviewEvent::Kind::member_joined) {
+            ++joins;
+        } else {
+            ASSERT_EQ(e->kind, ReviewEvent::Kind::peer);
+            seen[e->peer.member].push_back(e->peer.sequence);
+        }
+    }
+    EXPECT_EQ(joins, 3u);
+    std::size_t updates = 0;
+    for (const auto& [peer, sequences] : seen) {
+        SCOPED_TRACE(peer);
+        EXPECT_LE(sequences.size(), 2u);
+        EXPECT_TRUE(std::is_sorted(sequences.begin(), sequences.end()));
+        updates += sequences.size();
+    }
+    EXPECT_LE(updates, 6u);
+    // Nothing is lost that matters: each peer's newest pose reaches the watcher.
+    for (std::size_t p = 1; p < names.size(); ++p) {
+        SCOPED_TRACE(names[p]);
+        for (int k = 0; k < 20 && (seen[names[p]].empty() || seen[names[p]].back() != POSES); ++k) {
+            auto e = watcher.next(500ms);
+            if (e.ok() && e->kind == ReviewEvent::Kind::peer) {
+                seen[e->peer.member].push_back(e->peer.sequence);
+            }
+        }
+        ASSERT_FALSE(seen[names[p]].empty());
+        EXPECT_EQ(seen[names[p]].back(), POSES);
+    }
+    for (auto& [name, session] : members) {
+        EXPECT_TRUE(session->finish().ok()) << name;
+    }
+}
+
 TEST_F(MassiveDaemon, SigtermEndsReviewStreamsAndExitsZero) {
     DaemonProcess daemon(daemon_args(*s_models));
     ASSERT_TRUE(daemon.ok()) << daemon.error();
