@@ -497,6 +497,14 @@ def test_review_room(client: proxima.Client) -> None:
             assert peer.WhichOneof("event") == "peer" and peer.peer.member == "bob"
             np.testing.assert_array_equal(proxima.transform_matrix(peer.peer.transform)[:, 3],
                                           [0.5, 0.5, 20.0])
+            # While ann only poses, bob's updates she passes are held coalesced: his newest.
+            last = [bob.pose((0.5, 0.5, 20.0 + 0.01 * k)).sequence for k in range(30)][-1]
+            ann.pose((1.0, 0.5, 0.5))
+            latest = [ann.next_event(10, "peer").peer.sequence]
+            while latest[-1] != last:  # bob's last update may come after ann's answer
+                latest.append(ann.next_event(10, "peer").peer.sequence)
+            assert len(latest) <= 2, latest
+            bob.pose((0.5, 0.5, 20.0))
             # Edits: bob adds a box across his avatar; both see it; it collides with the avatar.
             added = bob.add(proxima.box("crate", (0.55, 0.3, 19.8), (0.95, 0.7, 20.2)))
             assert added.object == stored and added.model_version == 1

@@ -292,7 +292,8 @@ class ReviewSession:
 
     pose() and the edit calls send a request and wait for its answer (the AvatarResult, or the
     EditApplied of this member's edit); events met meanwhile (peer updates, other members'
-    edits, joins and leaves) stay queued for next_event(). send_pose() and send_edit() only send.
+    edits, joins and leaves) stay queued for next_event(), a peer's update replaced by its newer
+    one (as the daemon coalesces them). send_pose() and send_edit() only send.
     A context manager: close() on exit, cancel() when leaving with an exception."""
 
     def __init__(self, stub: Any, metadata: Any, room: str, model: str, member: str,
@@ -358,14 +359,23 @@ class ReviewSession:
             event = self._take(left)
             if kind is None or event.WhichOneof("event") == kind:
                 return event
-            self._held.append(event)
+            self._hold(event)
 
     def _wait(self, match: Callable[[Any], bool]) -> Any:
         while True:
             event = self._take(self._timeout)
             if match(event):
                 return event
-            self._held.append(event)
+            self._hold(event)
+
+    def _hold(self, event: Any) -> None:
+        # As the daemon's outbox does: a peer's update not yet taken is replaced by its newer
+        # one, moved to the end; so a member that only poses holds one update per peer, not
+        # every pose the room published.
+        if event.WhichOneof("event") == "peer":
+            self._held = [e for e in self._held if e.WhichOneof("event") != "peer"
+                          or e.peer.member != event.peer.member]
+        self._held.append(event)
 
     def send_pose(self, pose: ArrayLike, sequence: Optional[int] = None) -> int:
         """Sends a pose (see geometry.transform: a (3, 4) matrix, 12 numbers or a translation)
