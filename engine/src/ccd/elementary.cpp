@@ -242,7 +242,9 @@ void add_directions(Problem& pr, const CcdPoints& points, const double largest[3
     }
 }
 
-Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol) {
+// `directions`: also the exclusion directions (ElementaryOptions::direction_exclusion).
+Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol,
+                     bool directions) {
     Problem pr;
     double largest[3] = {};  // M_k
     pr.vertex_face = kind == CcdKind::vertex_face;
@@ -282,7 +284,9 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
         largest[k] = m;
     }
     pr.valid = true;
-    add_directions(pr, points, largest, d, tol);
+    if (directions) {
+        add_directions(pr, points, largest, d, tol);
+    }
     return pr;
 }
 
@@ -462,11 +466,8 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
     if (!(tol > 0.0)) {
         tol = 0.0;  // NaN or <= 0: refine to the width floor
     }
-    Problem pr = make_problem(kind, points, d, tol);
+    Problem pr = make_problem(kind, points, d, tol, options.direction_exclusion);
     pr.toi_width = options.toi_tolerance > 0.0 ? options.toi_tolerance : 0.0;  // NaN: the floor
-    if (!options.direction_exclusion) {
-        pr.directions = 0;
-    }
     if (!pr.valid) {
         // Non-finite coordinates: nothing can be excluded.
         result.hit = result.capped = true;
@@ -849,7 +850,7 @@ CcdCornerValues elementary_corner_values(CcdKind kind, const CcdPoints& points,
             }
         }
     }
-    const Problem pr = make_problem(kind, points, 0.0, 0.0);
+    const Problem pr = make_problem(kind, points, 0.0, 0.0, false);
     const double t[2] = {region[0], region[1]};
     const double u[2] = {region[2], region[3]};
     const double v[2] = {region[4], region[5]};

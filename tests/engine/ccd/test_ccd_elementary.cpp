@@ -540,12 +540,8 @@ TEST(CcdElementary, CornerValuesRejectBadRegions) {
 
 // ---- Acceptance: the public benchmark, zero false negatives ---------------------------------
 
-TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
-    const fs::path root = fs::path(PROXIMA_DATA_DIR) / "ccd-queries";
-    if (!fs::is_directory(root)) {
-        GTEST_SKIP() << "CCD benchmark data not found at " << root
-                     << " (PROXIMA_DATA_DIR/ccd-queries)";
-    }
+// The public benchmark's query files (PROXIMA_DATA_DIR/ccd-queries, every .csv below it), sorted.
+std::vector<fs::path> public_query_files(const fs::path& root) {
     std::vector<fs::path> files;
     for (const auto& e : fs::recursive_directory_iterator(root)) {
         if (e.is_regular_file() && e.path().extension() == ".csv") {
@@ -553,6 +549,30 @@ TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
         }
     }
     std::sort(files.begin(), files.end());
+    return files;
+}
+
+// fn(file, kind, index in the file, query) for every query of `files`, in order.
+template <class Fn>
+void for_each_public_query(const std::vector<fs::path>& files, Fn&& fn) {
+    for (const auto& file : files) {
+        const auto kind = ccd_kind_from_path(file.string());
+        ASSERT_TRUE(kind.has_value()) << file;
+        auto read = read_ccd_queries(file.string());
+        ASSERT_TRUE(read.ok()) << read.status().to_string();
+        for (std::size_t i = 0; i < read->size(); ++i) {
+            fn(file, *kind, i, read.value()[i]);
+        }
+    }
+}
+
+TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
+    const fs::path root = fs::path(PROXIMA_DATA_DIR) / "ccd-queries";
+    if (!fs::is_directory(root)) {
+        GTEST_SKIP() << "CCD benchmark data not found at " << root
+                     << " (PROXIMA_DATA_DIR/ccd-queries)";
+    }
+    const auto files = public_query_files(root);
     ASSERT_GE(files.size(), 42u);
     std::size_t queries = 0;
     std::size_t positives = 0;
@@ -561,35 +581,28 @@ TEST(CcdElementary, PublicBenchmarkHasNoFalseNegatives) {
     std::size_t capped = 0;
     std::size_t prefiltered = 0;
     const auto start = std::chrono::steady_clock::now();
-    for (const auto& file : files) {
-        const auto kind = ccd_kind_from_path(file.string());
-        ASSERT_TRUE(kind.has_value()) << file;
-        auto read = read_ccd_queries(file.string());
-        ASSERT_TRUE(read.ok()) << read.status().to_string();
-        for (std::size_t i = 0; i < read->size(); ++i) {
-            const auto& q = read.value()[i];
-            ASSERT_TRUE(q.truth.has_value()) << file;
-            const auto r = elementary(*kind, q.points);
-            if (elementary_prefilter_rejects(*kind, q.points)) {
-                // The plane / direction filter may only drop pairs that never touch, and never
-                // one the solver reports uncapped.
-                ++prefiltered;
-                EXPECT_FALSE(*q.truth)
-                    << "prefilter rejected a colliding query: " << file << " " << i;
-                EXPECT_TRUE(!r.hit || r.capped) << "prefilter rejected a hit: " << file << " " << i;
-            }
-            ++queries;
-            positives += *q.truth ? 1 : 0;
-            capped += r.capped ? 1 : 0;
-            if (*q.truth && !r.hit) {
-                ++false_negatives;
-                ADD_FAILURE() << "false negative: " << file << " query " << i;
-            }
-            false_positives += (!*q.truth && r.hit) ? 1 : 0;
-            EXPECT_GE(r.toi, 0.0);
-            EXPECT_LE(r.toi, 1.0);
+    for_each_public_query(files, [&](const fs::path& file, CcdKind kind, std::size_t i,
+                                     const auto& q) {
+        ASSERT_TRUE(q.truth.has_value()) << file;
+        const auto r = elementary(kind, q.points);
+        if (elementary_prefilter_rejects(kind, q.points)) {
+            // The plane / direction filter may only drop pairs that never touch, and never one
+            // the solver reports uncapped.
+            ++prefiltered;
+            EXPECT_FALSE(*q.truth) << "prefilter rejected a colliding query: " << file << " " << i;
+            EXPECT_TRUE(!r.hit || r.capped) << "prefilter rejected a hit: " << file << " " << i;
         }
-    }
+        ++queries;
+        positives += *q.truth ? 1 : 0;
+        capped += r.capped ? 1 : 0;
+        if (*q.truth && !r.hit) {
+            ++false_negatives;
+            ADD_FAILURE() << "false negative: " << file << " query " << i;
+        }
+        false_positives += (!*q.truth && r.hit) ? 1 : 0;
+        EXPECT_GE(r.toi, 0.0);
+        EXPECT_LE(r.toi, 1.0);
+    });
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::printf(
@@ -664,23 +677,11 @@ TEST(CcdElementary, DispatchedSolverEqualsPortable) {
     if (!fs::is_directory(root)) {
         GTEST_SKIP() << "CCD benchmark data not found at " << root;
     }
-    std::vector<fs::path> files;
-    for (const auto& e : fs::recursive_directory_iterator(root)) {
-        if (e.is_regular_file() && e.path().extension() == ".csv") {
-            files.push_back(e.path());
-        }
-    }
-    std::sort(files.begin(), files.end());
     variants.resize(1);  // the public queries at the defaults (the others: cost)
-    for (const auto& file : files) {
-        const auto kind = ccd_kind_from_path(file.string());
-        ASSERT_TRUE(kind.has_value()) << file;
-        auto read = read_ccd_queries(file.string());
-        ASSERT_TRUE(read.ok()) << read.status().to_string();
-        for (std::size_t i = 0; i < read->size(); ++i) {
-            compare(*kind, read.value()[i].points, file.string() + " " + std::to_string(i));
-        }
-    }
+    for_each_public_query(public_query_files(root), [&](const fs::path& file, CcdKind kind,
+                                                        std::size_t i, const auto& q) {
+        compare(kind, q.points, file.string() + " " + std::to_string(i));
+    });
 }
 
 }  // namespace
