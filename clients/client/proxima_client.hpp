@@ -372,7 +372,8 @@ class FrameStream {
 // events are read by a thread of the session into a small bounded queue (past 64 unread events it
 // stops reading, and the daemon's own bounds take over: see docs/api.md), and next() hands them
 // out in order. Peer updates do not count against that bound: as in the daemon, a peer's update
-// not yet taken is replaced by its newer one, moved to the end. Sends are not thread-safe with each other; next() may run on another thread.
+// not yet taken is replaced by its newer one, moved to the end. Sends are not thread-safe with each
+// other; next() may run on another thread.
 class ReviewSession {
   public:
     ~ReviewSession();  // cancels the stream if it was not finished

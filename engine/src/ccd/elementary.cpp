@@ -243,8 +243,7 @@ void add_directions(Problem& pr, const CcdPoints& points, const double largest[3
 }
 
 // `directions`: also the exclusion directions (ElementaryOptions::direction_exclusion).
-Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol,
-                     bool directions) {
+Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol, bool directions) {
     Problem pr;
     double largest[3] = {};  // M_k
     pr.vertex_face = kind == CcdKind::vertex_face;

@@ -678,10 +678,10 @@ TEST(CcdElementary, DispatchedSolverEqualsPortable) {
         GTEST_SKIP() << "CCD benchmark data not found at " << root;
     }
     variants.resize(1);  // the public queries at the defaults (the others: cost)
-    for_each_public_query(public_query_files(root), [&](const fs::path& file, CcdKind kind,
-                                                        std::size_t i, const auto& q) {
-        compare(kind, q.points, file.string() + " " + std::to_string(i));
-    });
+    for_each_public_query(public_query_files(root),
+                          [&](const fs::path& file, CcdKind kind, std::size_t i, const auto& q) {
+                              compare(kind, q.points, file.string() + " " + std::to_string(i));
+                          });
 }
 
 }  // namespace
