@@ -246,8 +246,12 @@ stage_tsan() {
   # executable fails; a daemon dies under its test and leaves its report file).
   # ignore_noninstrumented_modules, the preloaded absl::Mutex annotations and taskset -c 0 (oneTBB
   # then starts no worker thread) are for Debian's uninstrumented gRPC, Abseil and oneTBB; see
-  # tests/sanitizers/tsan.supp.
-  TSAN_OPTIONS="halt_on_error=1:exitcode=66:second_deadlock_stack=1:ignore_noninstrumented_modules=1:suppressions=$supp/tsan.supp:log_path=$logs/tsan" \
+  # tests/sanitizers/tsan.supp. history_size=7 (the largest; default 2): a `race:` suppression
+  # can only match a stack TSan can restore, and a worker thread that hands a call to gRPC
+  # (Finish sets the call's completion tag) and then runs a long query overwrites the default
+  # history before gRPC's executor thread reads the tag ("failed to restore the stack"; CI of
+  # 2026-11-26 at b68de04, Sessions.MoveOnlyFramesInterleavedWithQueriesMatchInProcess).
+  TSAN_OPTIONS="halt_on_error=1:exitcode=66:second_deadlock_stack=1:history_size=7:ignore_noninstrumented_modules=1:suppressions=$supp/tsan.supp:log_path=$logs/tsan" \
     LD_PRELOAD="$here/build/tsan/libabsl_mutex_tsan.so" \
     PROXIMA_SOAK_CYCLES="$soak_cycles_sanitized" \
     run_sanitized_ctest "$logs" taskset -c 0 ctest --preset tsan -j 1 -R "$concurrency" \
