@@ -212,6 +212,9 @@ void ProximityService::sample_metrics(std::vector<Sample>& out) const {
               static_cast<double>(c.budget_bytes));
         gauge("proxima_cache_resident_bytes", "Geometry and hierarchies resident in the cache",
               static_cast<double>(c.resident_bytes));
+        gauge("proxima_cache_charged_bytes",
+              "Review rooms' moved and added objects, charged to the cache's budget",
+              static_cast<double>(c.charged_bytes));
         counter("proxima_cache_hits_total", "Cache lookups that found the piece resident",
                 static_cast<double>(c.hits));
         counter("proxima_cache_misses_total", "Cache lookups that had to load the piece",

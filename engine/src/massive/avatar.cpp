@@ -92,13 +92,53 @@ StatusOr<std::string> ModelView::object_name(std::uint32_t object) const {
 
 namespace {
 
-std::shared_ptr<ResidentPiece> overlay_piece(std::uint32_t object, TriangleMesh mesh) {
+// An overlay piece and what it owns: the count of its hierarchy's bytes and its charge to the
+// cache's budget, which so last exactly as long as the piece (whoever holds it).
+struct OverlayHolder {
+    OverlayHolder(std::shared_ptr<std::atomic<std::int64_t>> bytes, GeometryCache::Charge c,
+                  std::uint32_t object, PieceGeometry g)
+        : tree_bytes(std::move(bytes)),
+          charge(std::move(c)),
+          piece(UINT32_MAX, object, std::move(g), tree_bytes.get()) {}
+    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;
+    GeometryCache::Charge charge;
+    ResidentPiece piece;
+};
+
+// A moved or added object in memory, charged to the cache (RESOURCE_EXHAUSTED when the edited
+// objects would exceed its budget; `replaces`: the overlay object this one takes the place of).
+StatusOr<ModelView::OverlayObject> overlay_object(GeometryCache& cache, std::uint32_t object,
+                                                  std::string name, TriangleMesh mesh,
+                                                  const ModelView::OverlayObject* replaces) {
     PieceGeometry g;
     g.vertices = std::move(mesh.vertices);
     g.triangles = std::move(mesh.triangles);
     g.source_triangles.resize(g.triangles.size());
     std::iota(g.source_triangles.begin(), g.source_triangles.end(), 0u);
-    return std::make_shared<ResidentPiece>(UINT32_MAX, object, std::move(g), nullptr);
+    const auto fixed = static_cast<std::int64_t>(
+        g.vertices.size() * sizeof(Vec3) + g.triangles.size() * sizeof(TriangleIndices) +
+        g.source_triangles.size() * sizeof(std::uint32_t) + sizeof(OverlayHolder));
+    auto bytes = std::make_shared<std::atomic<std::int64_t>>(0);
+    auto charge = cache.charge(fixed, bytes, replaces != nullptr ? replaces->charge : nullptr);
+    if (!charge.ok()) {
+        return charge.status();
+    }
+    const Aabb box = compute_box(g.vertices);
+    auto holder = std::make_shared<OverlayHolder>(bytes, *charge, object, std::move(g));
+    return ModelView::OverlayObject{object, std::move(name), box,
+                                    std::shared_ptr<ResidentPiece>(holder, &holder->piece),
+                                    std::move(charge).value()};
+}
+
+// The overlay object of `object` in `snap`, if any.
+const ModelView::OverlayObject* find_overlay(const ModelView::Snapshot& snap,
+                                             std::uint32_t object) {
+    for (const auto& o : snap.overlay) {
+        if (o.object == object) {
+            return &o;
+        }
+    }
+    return nullptr;
 }
 
 }  // namespace
@@ -144,12 +184,16 @@ Status ModelView::move_object(std::uint32_t object, const Affine& transform) {
     if (Status s = validate_mesh(mesh, "moved object '" + name + "'"); !s.ok()) {
         return s;
     }
-    OverlayObject o{object, name, compute_box(mesh.vertices),
-                    overlay_piece(object, std::move(mesh))};
+    const auto current = snapshot();
+    auto o =
+        overlay_object(*m_cache, object, name, std::move(mesh), find_overlay(*current, object));
+    if (!o.ok()) {
+        return o.status();
+    }
     std::unique_lock lock(m_mutex);
     auto next = std::make_shared<Snapshot>(*m_snapshot);
     std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
-    next->overlay.push_back(std::move(o));
+    next->overlay.push_back(std::move(o).value());
     next->masked[object] = 1;
     ++next->version;
     m_snapshot = std::move(next);
@@ -160,16 +204,30 @@ StatusOr<std::uint32_t> ModelView::add_object(ModelObject object) {
     if (Status s = validate_mesh(object.mesh, "added object '" + object.name + "'"); !s.ok()) {
         return s;
     }
-    const Aabb box = compute_box(object.mesh.vertices);
+    // The id is taken under the lock; the copy is charged (and may be refused) before it.
+    std::uint32_t id = 0;
+    {
+        std::unique_lock lock(m_mutex);
+        id = static_cast<std::uint32_t>(m_store->objects().size());
+        for (const auto& o : m_snapshot->overlay) {
+            id = std::max(id, o.object + 1);
+        }
+        id = std::max(id, m_next_added);
+    }
+    auto o = overlay_object(*m_cache, id, object.name, std::move(object.mesh), nullptr);
+    if (!o.ok()) {
+        return o.status();
+    }
     std::unique_lock lock(m_mutex);
     auto next = std::make_shared<Snapshot>(*m_snapshot);
-    std::uint32_t id = static_cast<std::uint32_t>(m_store->objects().size());
-    for (const auto& o : next->overlay) {
-        id = std::max(id, o.object + 1);
+    if (id < m_next_added) {
+        // Another add took that id meanwhile: this object gets the next one.
+        id = m_next_added;
+        o->object = id;
+        o->piece->object = id;
     }
-    id = std::max(id, m_next_added);
     m_next_added = id + 1;
-    next->overlay.push_back({id, object.name, box, overlay_piece(id, std::move(object.mesh))});
+    next->overlay.push_back(std::move(o).value());
     ++next->version;
     m_snapshot = std::move(next);
     return id;

@@ -159,6 +159,51 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     return handle;
 }
 
+struct GeometryCache::ChargeRecord {
+    std::int64_t fixed = 0;
+    std::shared_ptr<const std::atomic<std::int64_t>> growing;
+    std::int64_t bytes() const {
+        return fixed + (growing ? growing->load(std::memory_order_relaxed) : 0);
+    }
+};
+
+std::int64_t GeometryCache::charged_locked() {
+    std::int64_t total = 0;
+    std::erase_if(m_charges, [&](const std::weak_ptr<const ChargeRecord>& w) {
+        auto c = w.lock();
+        if (!c) {
+            return true;
+        }
+        total += c->bytes();
+        return false;
+    });
+    return total;
+}
+
+StatusOr<GeometryCache::Charge> GeometryCache::charge(
+    std::int64_t fixed, std::shared_ptr<const std::atomic<std::int64_t>> growing,
+    const Charge& replaces) {
+    auto record = std::make_shared<ChargeRecord>();
+    record->fixed = fixed;
+    record->growing = std::move(growing);
+    std::lock_guard lock(m_mutex);
+    std::int64_t after = charged_locked() + record->bytes();
+    if (replaces) {
+        after -= static_cast<const ChargeRecord*>(replaces.get())->bytes();
+    }
+    if (after > static_cast<std::int64_t>(m_budget)) {
+        return Status(StatusCode::resource_exhausted,
+                      "edited objects would hold " + std::to_string(after) +
+                          " bytes in memory, over the geometry cache's budget of " +
+                          std::to_string(m_budget) +
+                          " bytes (--cache-bytes): delete added objects or move objects back "
+                          "to their stored placement first");
+    }
+    m_charges.push_back(record);
+    evict_locked();
+    return Charge(record);
+}
+
 std::int64_t GeometryCache::resident_locked() const {
     // Summed on demand: hierarchies grow without taking the cache lock.
     std::int64_t total = 0;
@@ -169,10 +214,12 @@ std::int64_t GeometryCache::resident_locked() const {
 }
 
 void GeometryCache::evict_locked() {
-    // Recompute the resident total (hierarchies grow without taking the cache lock).
+    // Recompute the resident total (hierarchies grow without taking the cache lock); the charges
+    // from outside count against the same budget.
     std::int64_t total = resident_locked();
+    const std::int64_t budget = static_cast<std::int64_t>(m_budget) - charged_locked();
     auto it = m_lru.end();
-    while (total > static_cast<std::int64_t>(m_budget) && it != m_lru.begin()) {
+    while (total > budget && it != m_lru.begin()) {
         --it;
         auto e = m_entries.find(*it);
         auto& entry = e->second;
@@ -232,6 +279,11 @@ CacheStats GeometryCache::stats() const {
     CacheStats s = m_stats;
     std::int64_t total = resident_locked();
     s.resident_bytes = total;
+    for (const auto& w : m_charges) {
+        if (auto c = w.lock()) {
+            s.charged_bytes += c->bytes();
+        }
+    }
     s.peak_bytes = std::max(s.peak_bytes, total);
     return s;
 }

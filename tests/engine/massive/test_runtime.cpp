@@ -676,6 +676,97 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
     fs::remove_all(dir);
 }
 
+// A room's moved and added objects live in memory outside the cache's pieces; they count against
+// the same budget M: the cache evicts pieces to make room, the charge lasts while any snapshot
+// holds the copy, and an edit whose copies alone would exceed M fails and changes nothing.
+TEST(Avatar, EditedObjectsAreChargedToTheCacheBudget) {
+    const auto dir = temp_dir("avatar-charged");
+    {
+        auto writer = StoreWriter::create(dir.string(), {});
+        ASSERT_TRUE(writer.ok());
+        for (int k = 0; k < 40; ++k) {
+            ASSERT_TRUE(
+                (*writer)
+                    ->add({"sphere-" + std::to_string(k), sphere_mesh({3.0 * k, 0, 0}, 1.0, 24)})
+                    .ok());
+        }
+        ASSERT_TRUE((*writer)->commit().ok());
+    }
+    std::shared_ptr<const Store> store = *Store::open(dir.string());
+    const auto piece_bytes = static_cast<std::int64_t>(store->pieces()[0].weight());
+    auto cache = std::make_shared<GeometryCache>(6 * piece_bytes);
+    auto view = std::make_shared<ModelView>(store, cache);
+    auto fill = [&] {
+        for (std::uint32_t p = 0; p < 40; ++p) {
+            auto h = cache->get(store, p);
+            ASSERT_TRUE(h.ok());
+            (void)(*h)->bvh.children((*h)->bvh.root());
+        }
+    };
+    auto within_budget = [&](const char* what) {
+        const auto s = cache->stats();
+        EXPECT_LE(s.resident_bytes + s.charged_bytes, static_cast<std::int64_t>(cache->budget()))
+            << what << ": resident " << s.resident_bytes << " charged " << s.charged_bytes;
+    };
+    fill();
+    EXPECT_EQ(cache->stats().charged_bytes, 0);
+    within_budget("pieces only");
+
+    Affine away;
+    away.m[3] = 0.5;
+    ASSERT_TRUE(view->move_object(0, away).ok());
+    const auto one_copy = cache->stats().charged_bytes;
+    // (A piece's weight also counts a whole hierarchy; the copy's tree is not built yet.)
+    EXPECT_GT(one_copy, piece_bytes / 8) << "the moved copy is not charged";
+    within_budget("after a move");
+    fill();
+    within_budget("pieces loaded after a move");
+    // A second move replaces the copy: charged once, not twice.
+    away.m[3] = 0.7;
+    ASSERT_TRUE(view->move_object(0, away).ok());
+    EXPECT_EQ(cache->stats().charged_bytes, one_copy);
+    // A snapshot (a query in progress) keeps its copy charged until it lets go.
+    auto held = view->snapshot();
+    ASSERT_TRUE(view->move_object(0, Affine{}).ok());
+    EXPECT_EQ(cache->stats().charged_bytes, one_copy);
+    held.reset();
+    EXPECT_EQ(cache->stats().charged_bytes, 0) << "the copy moved back is still charged";
+
+    // Added objects until the copies alone would exceed M: that add fails, changing nothing.
+    std::vector<std::uint32_t> added;
+    Status refused;
+    for (int k = 0; k < 60 && refused.ok(); ++k) {
+        const auto version = view->version();
+        const auto overlay = view->snapshot()->overlay.size();
+        auto id = view->add_object(
+            {"crate-" + std::to_string(k), sphere_mesh({0, 5.0 + 3.0 * k, 0}, 1.0, 24)});
+        if (id.ok()) {
+            added.push_back(*id);
+            within_budget("after an add");
+            continue;
+        }
+        refused = id.status();
+        EXPECT_EQ(view->version(), version);
+        EXPECT_EQ(view->snapshot()->overlay.size(), overlay);
+    }
+    ASSERT_FALSE(refused.ok()) << "60 added spheres fit in a budget of 6 pieces";
+    EXPECT_EQ(refused.code(), StatusCode::resource_exhausted) << refused.to_string();
+    EXPECT_GE(added.size(), 4u);
+    EXPECT_LE(cache->stats().charged_bytes, static_cast<std::int64_t>(cache->budget()));
+    // The stored objects are still answered from the pieces (loads evict down to what is left).
+    fill();
+    // Moving a stored object is refused the same way while the added ones fill M.
+    const auto moved = view->move_object(5, away);
+    EXPECT_EQ(moved.code(), StatusCode::resource_exhausted) << moved.to_string();
+    EXPECT_EQ(view->snapshot()->masked[5], 0);
+    for (auto id : added) {
+        ASSERT_TRUE(view->delete_object(id).ok());
+    }
+    EXPECT_EQ(cache->stats().charged_bytes, 0);
+    EXPECT_TRUE(view->move_object(5, away).ok());
+    fs::remove_all(dir);
+}
+
 TEST(Avatar, MovingObjectsAwayAndBackKeepsNoCopies) {
     // The load harness's edit pattern (issue #16 item 2): objects moved away and back, one after
     // the other. A move back (the identity) returns the object to its stored pieces, so the

@@ -50,8 +50,11 @@ class ModelView {
 
     // Each edit is validated whole (unknown or deleted object, non-finite transform, invalid
     // mesh) and then applied; a failed edit changes nothing. A moved stored object is held in
-    // memory (an overlay object, not charged to the cache's budget) until it is deleted or moved
-    // back to its stored placement (the identity transform), which drops the copy.
+    // memory (an overlay object) until it is deleted or moved back to its stored placement (the
+    // identity transform), which drops the copy. Moved and added objects are charged to the
+    // cache's budget M (GeometryCache::charge) for as long as any query or snapshot holds them:
+    // the cache evicts pieces to make room, and an edit whose copies alone would exceed M fails
+    // with RESOURCE_EXHAUSTED.
     Status move_object(std::uint32_t object, const Affine& transform);
     StatusOr<std::uint32_t> add_object(ModelObject object);
     Status delete_object(std::uint32_t object);
@@ -66,7 +69,8 @@ class ModelView {
         std::uint32_t object = 0;
         std::string name;
         Aabb box;
-        std::shared_ptr<ResidentPiece> piece;
+        std::shared_ptr<ResidentPiece> piece;  // owns its charge to the cache's budget
+        GeometryCache::Charge charge;          // (the same charge, for an edit replacing it)
     };
     struct Snapshot {
         std::vector<std::uint8_t> masked;  // per store object: deleted or moved (not from disk)

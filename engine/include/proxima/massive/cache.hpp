@@ -48,6 +48,10 @@ struct CacheStats {
     std::uint64_t bytes_loaded = 0;  // piece record bytes read
     std::uint64_t evictions = 0;
     double blocked_seconds = 0;  // time get() spent waiting for disk
+    // Memory outside the cache charged to its budget (GeometryCache::charge): the review rooms'
+    // moved and added objects, with their hierarchies. Pieces are evicted to keep resident_bytes +
+    // charged_bytes within the budget.
+    std::int64_t charged_bytes = 0;
 };
 // Counters accumulated between two snapshots of a shared cache (budget, resident and peak are
 // taken from `after`).
@@ -78,6 +82,16 @@ class GeometryCache {
                   const std::vector<std::uint32_t>& pieces, std::uint64_t stream = 0);
     bool resident(const Store& store, std::uint32_t piece) const;
 
+    // Memory held outside the cache that counts against its budget: a review room's moved and
+    // added objects (ModelView's overlay). `fixed` bytes plus what `growing` counts (a lazy
+    // hierarchy's nodes) stay charged while the returned handle lives; charging evicts unpinned
+    // pieces to make room. RESOURCE_EXHAUSTED, and nothing charged, when the charges alone would
+    // exceed the budget with this one (less `replaces`, a charge this one takes the place of).
+    using Charge = std::shared_ptr<const void>;
+    StatusOr<Charge> charge(std::int64_t fixed,
+                            std::shared_ptr<const std::atomic<std::int64_t>> growing,
+                            const Charge& replaces = nullptr);
+
     CacheStats stats() const;
     std::uint64_t budget() const { return m_budget; }
     // Drops every unpinned piece (tests and benchmarks start cold).
@@ -99,6 +113,7 @@ class GeometryCache {
                                bool by_prefetch);
     void evict_locked();
     std::int64_t resident_locked() const;
+    std::int64_t charged_locked();  // drops the charges whose handles are gone
     void prefetch_loop();
 
     const std::uint64_t m_budget;
@@ -107,6 +122,8 @@ class GeometryCache {
     std::unordered_map<Key, std::shared_ptr<Entry>, KeyHash> m_entries;
     std::list<Key> m_lru;  // front: most recently used
     CacheStats m_stats;
+    struct ChargeRecord;
+    std::vector<std::weak_ptr<const ChargeRecord>> m_charges;
 
     struct Hint {
         std::shared_ptr<const Store> store;
