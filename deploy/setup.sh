@@ -37,8 +37,10 @@ packages=(
   gnuplot-nox
   # Scale-out (docs/deploy.md): several daemons behind HAProxy (tests/scaleout/test_haproxy.py).
   haproxy
-  # The review page's browser test (tests/web): Debian's chromium, driven by playwright-core.
-  chromium
+  # The review page's browser test (tests/web): Debian's chromium, driven by playwright-core;
+  # the page's sans-serif text renders in Liberation Sans as in the reference screenshots (newer
+  # chromium packages no longer pull a font in, and DejaVu's wider glyphs fail the comparison).
+  chromium fonts-liberation
 )
 
 log() { printf '[setup] %s\n' "$*" >&2; }
