@@ -167,17 +167,20 @@ struct GeometryCache::ChargeRecord {
     }
 };
 
-std::int64_t GeometryCache::charged_locked() {
+std::int64_t GeometryCache::live_charges_locked() const {
     std::int64_t total = 0;
-    std::erase_if(m_charges, [&](const std::weak_ptr<const ChargeRecord>& w) {
-        auto c = w.lock();
-        if (!c) {
-            return true;
+    for (const auto& w : m_charges) {
+        if (auto c = w.lock()) {
+            total += c->bytes();
         }
-        total += c->bytes();
-        return false;
-    });
+    }
     return total;
+}
+
+std::int64_t GeometryCache::charged_locked() {
+    std::erase_if(m_charges,
+                  [](const std::weak_ptr<const ChargeRecord>& w) { return w.expired(); });
+    return live_charges_locked();
 }
 
 StatusOr<GeometryCache::Charge> GeometryCache::charge(
@@ -279,11 +282,7 @@ CacheStats GeometryCache::stats() const {
     CacheStats s = m_stats;
     std::int64_t total = resident_locked();
     s.resident_bytes = total;
-    for (const auto& w : m_charges) {
-        if (auto c = w.lock()) {
-            s.charged_bytes += c->bytes();
-        }
-    }
+    s.charged_bytes = live_charges_locked();
     s.peak_bytes = std::max(s.peak_bytes, total);
     return s;
 }

@@ -78,6 +78,19 @@ TriangleMesh sphere_mesh(Vec3 c, double r, int n) {
     return m;
 }
 
+// A store of 40 equal spheres in a row along x (one piece each), for the cache-budget tests.
+void write_sphere_row(const fs::path& dir) {
+    auto writer = StoreWriter::create(dir.string(), {});
+    ASSERT_TRUE(writer.ok());
+    for (int k = 0; k < 40; ++k) {
+        ASSERT_TRUE(
+            (*writer)
+                ->add({"sphere-" + std::to_string(k), sphere_mesh({3.0 * k, 0, 0}, 1.0, 24)})
+                .ok());
+    }
+    ASSERT_TRUE((*writer)->commit().ok());
+}
+
 // Imports a plant of about `triangles` triangles; pieces at most `max_piece_bytes`.
 std::shared_ptr<const Store> plant_store(const fs::path& dir, std::uint64_t triangles,
                                          std::uint64_t max_piece_bytes) {
@@ -345,17 +358,7 @@ TEST(GeometryCache, PrefetchBuildsOnlyTheUpperLevels) {
 
 TEST(GeometryCache, StaysUnderBudgetKeepsPinsAndNeverCachesCorruption) {
     const auto dir = temp_dir("cache");
-    {
-        auto writer = StoreWriter::create(dir.string(), {});
-        ASSERT_TRUE(writer.ok());
-        for (int k = 0; k < 40; ++k) {
-            ASSERT_TRUE(
-                (*writer)
-                    ->add({"sphere-" + std::to_string(k), sphere_mesh({3.0 * k, 0, 0}, 1.0, 24)})
-                    .ok());
-        }
-        ASSERT_TRUE((*writer)->commit().ok());
-    }
+    ASSERT_NO_FATAL_FAILURE(write_sphere_row(dir));
     std::shared_ptr<const Store> store = *Store::open(dir.string());
     const auto piece_bytes = store->pieces()[0].weight();
     GeometryCache cache(6 * piece_bytes);
@@ -681,17 +684,7 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
 // holds the copy, and an edit whose copies alone would exceed M fails and changes nothing.
 TEST(Avatar, EditedObjectsAreChargedToTheCacheBudget) {
     const auto dir = temp_dir("avatar-charged");
-    {
-        auto writer = StoreWriter::create(dir.string(), {});
-        ASSERT_TRUE(writer.ok());
-        for (int k = 0; k < 40; ++k) {
-            ASSERT_TRUE(
-                (*writer)
-                    ->add({"sphere-" + std::to_string(k), sphere_mesh({3.0 * k, 0, 0}, 1.0, 24)})
-                    .ok());
-        }
-        ASSERT_TRUE((*writer)->commit().ok());
-    }
+    ASSERT_NO_FATAL_FAILURE(write_sphere_row(dir));
     std::shared_ptr<const Store> store = *Store::open(dir.string());
     const auto piece_bytes = static_cast<std::int64_t>(store->pieces()[0].weight());
     auto cache = std::make_shared<GeometryCache>(6 * piece_bytes);

@@ -113,7 +113,8 @@ class GeometryCache {
                                bool by_prefetch);
     void evict_locked();
     std::int64_t resident_locked() const;
-    std::int64_t charged_locked();  // drops the charges whose handles are gone
+    std::int64_t charged_locked();             // drops the charges whose handles are gone
+    std::int64_t live_charges_locked() const;  // sums the live charges, drops none
     void prefetch_loop();
 
     const std::uint64_t m_budget;
