@@ -1064,7 +1064,7 @@ TEST_F(MassiveRegion, FetchRegionNearestFirstWithinTheRadius) {
             // The piece itself: the store's geometry with its object triangle ids.
             auto local = m_store->read_piece(p);
             ASSERT_TRUE(local.ok());
-            EXPECT_EQ(got.triangle_ids, local->source_triangles);
+            EXPECT_EQ(got.triangle_ids, local->source_ids());
             EXPECT_EQ(got.vertices, local->vertices);
             EXPECT_EQ(got.triangles, local->triangles);
             triangles += got.triangles.size();

@@ -112,12 +112,10 @@ StatusOr<ModelView::OverlayObject> overlay_object(GeometryCache& cache, std::uin
                                                   const ModelView::OverlayObject* replaces) {
     PieceGeometry g;
     g.vertices = std::move(mesh.vertices);
-    g.triangles = std::move(mesh.triangles);
-    g.source_triangles.resize(g.triangles.size());
-    std::iota(g.source_triangles.begin(), g.source_triangles.end(), 0u);
-    const auto fixed = static_cast<std::int64_t>(
-        g.vertices.size() * sizeof(Vec3) + g.triangles.size() * sizeof(TriangleIndices) +
-        g.source_triangles.size() * sizeof(std::uint32_t) + sizeof(OverlayHolder));
+    g.triangles = std::move(mesh.triangles);  // the whole object: source_triangles stays empty
+    const auto fixed = static_cast<std::int64_t>(g.vertices.size() * sizeof(Vec3) +
+                                                 g.triangles.size() * sizeof(TriangleIndices) +
+                                                 sizeof(OverlayHolder));
     auto bytes = std::make_shared<std::atomic<std::int64_t>>(0);
     auto charge = cache.charge(fixed, bytes, replaces != nullptr ? replaces->charge : nullptr);
     if (!charge.ok()) {
@@ -152,10 +150,9 @@ Status ModelView::move_object(std::uint32_t object, const Affine& transform) {
     }
     if (object < m_store->objects().size() && transform.m == Affine{}.m) {
         // Back to the stored placement: the object reads from its stored pieces again, through
-        // the cache, and its in-memory copy goes (an overlay copy is not charged to the cache's
-        // budget, so a room whose members move objects away and back would otherwise keep every
-        // object it ever moved in memory). The same geometry bit for bit: the identity map
-        // gives each stored coordinate back exactly.
+        // the cache, and its in-memory copy (charged to the cache's budget) goes with the
+        // snapshots that hold it. The same geometry bit for bit: the identity map gives each
+        // stored coordinate back exactly.
         std::unique_lock lock(m_mutex);
         auto next = std::make_shared<Snapshot>(*m_snapshot);
         std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
@@ -204,7 +201,9 @@ StatusOr<std::uint32_t> ModelView::add_object(ModelObject object) {
     if (Status s = validate_mesh(object.mesh, "added object '" + object.name + "'"); !s.ok()) {
         return s;
     }
-    // The id is taken under the lock; the copy is charged (and may be refused) before it.
+    // The copy is charged (and may be refused) outside the lock, so the id is only proposed
+    // here and settled under the lock below: a refused add leaves the next id unused, as if it
+    // had never been asked.
     std::uint32_t id = 0;
     {
         std::unique_lock lock(m_mutex);
@@ -341,8 +340,8 @@ struct AvatarTracker::Query {
         object = p->object;
         ++result.pieces_tested;
         auto& rp = const_cast<ResidentPiece&>(*p);
-        PairHit hit = closest_pair({&rp.bvh, &rp.geometry.source_triangles}, avatar, bound_sq,
-                                   slack, ties_avatar_first);
+        PairHit hit = closest_pair({&rp.bvh, rp.geometry.source_map()}, avatar, bound_sq, slack,
+                                   ties_avatar_first);
         result.exact_tests += hit.exact_tests;
         return hit;
     }

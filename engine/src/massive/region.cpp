@@ -128,7 +128,7 @@ StatusOr<RegionPiece> read_region_piece(const std::shared_ptr<const Store>& stor
     const auto copy = [&](const PieceGeometry& g) {
         out.vertices = g.vertices;
         out.triangles = g.triangles;
-        out.triangle_ids = g.source_triangles;
+        out.triangle_ids = g.source_ids();
     };
     if (ref.overlay) {
         const auto& o = snapshot->overlay.at(ref.overlay_index);

@@ -16,6 +16,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <set>
 #include <system_error>
 
@@ -1032,15 +1033,29 @@ StatusOr<PieceGeometry> Store::read_piece(std::uint32_t piece) const {
     p += g.triangles.size() * sizeof(TriangleIndices);
     std::memcpy(g.source_triangles.data(), p, g.source_triangles.size() * sizeof(std::uint32_t));
     const std::uint64_t object_triangles = st.objects[info.object].triangle_count;
+    bool identity = true;
     for (std::size_t t = 0; t < g.triangles.size(); ++t) {
         const auto& tri = g.triangles[t];
         if (tri[0] >= info.vertex_count || tri[1] >= info.vertex_count ||
             tri[2] >= info.vertex_count || g.source_triangles[t] >= object_triangles) {
             return mismatch("triangle " + std::to_string(t) + " out of range");
         }
+        identity = identity && g.source_triangles[t] == t;
+    }
+    if (identity) {
+        g.source_triangles = {};  // PieceGeometry::source(t) == t: nothing to keep resident
     }
     st.pieces_read += 1;
     return g;
+}
+
+std::vector<std::uint32_t> PieceGeometry::source_ids() const {
+    if (!source_triangles.empty()) {
+        return source_triangles;
+    }
+    std::vector<std::uint32_t> ids(triangles.size());
+    std::iota(ids.begin(), ids.end(), 0u);
+    return ids;
 }
 
 Status Store::verify(const ProgressFn& progress) const {

@@ -242,8 +242,8 @@ struct VerifyRun {
         }
         ResidentPiece& a = **ha;
         ResidentPiece& b = **hb;
-        const PairHit hit = closest_pair({&a.bvh, &a.geometry.source_triangles},
-                                         {&b.bvh, &b.geometry.source_triangles}, tol_sq, slack);
+        const PairHit hit = closest_pair({&a.bvh, a.geometry.source_map()},
+                                         {&b.bvh, b.geometry.source_map()}, tol_sq, slack);
         exact_tests += hit.exact_tests;
         merge(a, b, hit);
         return true;
@@ -521,8 +521,7 @@ StatusOr<TriangleMesh> read_object(const Store& store, std::uint32_t object) {
         mesh.vertices.insert(mesh.vertices.end(), g->vertices.begin(), g->vertices.end());
         for (std::size_t t = 0; t < g->triangles.size(); ++t) {
             const auto& tri = g->triangles[t];
-            mesh.triangles.at(g->source_triangles[t]) = {tri[0] + base, tri[1] + base,
-                                                         tri[2] + base};
+            mesh.triangles.at(g->source(t)) = {tri[0] + base, tri[1] + base, tri[2] + base};
         }
     }
     return mesh;

@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <numeric>
 #include <set>
 #include <string>
 #include <thread>
@@ -199,10 +200,22 @@ void expect_store_matches(const Store& store, const std::vector<ModelObject>& ob
                     ASSERT_TRUE(same_bits(g->vertices[v], mesh.vertices[v]));
                 }
                 EXPECT_EQ(g->triangles, mesh.triangles);
+                // The whole object in order: no per-triangle map is kept resident.
+                EXPECT_TRUE(g->source_triangles.empty()) << objects[i].name;
+                EXPECT_EQ(g->source_map(), nullptr);
             }
+
             std::vector<char> used(g->vertices.size(), 0);
+            const auto ids = g->source_ids();
+            ASSERT_EQ(ids.size(), g->triangles.size());
+            // A map is kept exactly when it is not the identity (a split piece's, mostly).
+            std::vector<std::uint32_t> in_order(ids.size());
+            std::iota(in_order.begin(), in_order.end(), 0u);
+            EXPECT_EQ(g->source_triangles.empty(), ids == in_order) << "piece " << p;
+            EXPECT_EQ(g->source_map() == nullptr, ids == in_order) << "piece " << p;
             for (std::size_t t = 0; t < g->triangles.size(); ++t) {
-                const auto s = g->source_triangles[t];
+                const auto s = g->source(t);
+                ASSERT_EQ(ids[t], s);
                 ASSERT_LT(s, mesh.triangles.size());
                 ++seen[s];
                 for (int k = 0; k < 3; ++k) {

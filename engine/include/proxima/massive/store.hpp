@@ -56,10 +56,23 @@ struct PieceInfo {
 
 // A piece as read from disk: its own compact vertex array (exact copies of the object's
 // coordinates), triangles indexing it, and for each triangle its index in the whole object.
+// `source_triangles` is empty when that index is the triangle's own (a piece that is its whole
+// object, in order: most pieces), so resident pieces do not spend 4 bytes a triangle on it.
 struct PieceGeometry {
     std::vector<Vec3> vertices;
     std::vector<TriangleIndices> triangles;
     std::vector<std::uint32_t> source_triangles;
+
+    // Triangle t's index in the whole object.
+    std::uint32_t source(std::size_t t) const {
+        return source_triangles.empty() ? static_cast<std::uint32_t>(t) : source_triangles[t];
+    }
+    // The map for a TreeRef or LazyBvh: null when it is the identity.
+    const std::vector<std::uint32_t>* source_map() const {
+        return source_triangles.empty() ? nullptr : &source_triangles;
+    }
+    // Every triangle's index in the whole object, in piece order.
+    std::vector<std::uint32_t> source_ids() const;
 };
 
 struct StoreSummary {
