@@ -415,6 +415,7 @@ const std::array<const char*, KIND_COUNT> KIND_NAMES = {
 struct Call {
     double start = 0;          // seconds since the run began (when the call was due)
     std::int64_t latency = 0;  // nanoseconds
+    std::int64_t server = -1;  // nanoseconds the daemon reports it spent (-1: not reported)
     int kind = 0;
     std::string code;     // "OK" or the gRPC code name
     std::string message;  // describe_status of a failure
@@ -471,7 +472,9 @@ class Recorder {
     explicit Recorder(Shared& shared) : m_shared(shared) {}
     // Records a call due at `due` that ended now; false once the client has made its share. A
     // call the end of the run cancelled is not a figure.
-    bool record(int kind, Clock::time_point due, const Status& status) {
+    // `server_seconds`: the daemon's own time for the call where it reports one (< 0: none).
+    bool record(int kind, Clock::time_point due, const Status& status,
+                double server_seconds = -1.0) {
         if (m_shared.stop.load() && status.code() == StatusCode::cancelled) {
             return false;
         }
@@ -479,6 +482,9 @@ class Recorder {
         Call c;
         c.start = m_shared.since_start(due);
         c.latency = std::chrono::duration_cast<std::chrono::nanoseconds>(now - due).count();
+        if (server_seconds >= 0.0) {
+            c.server = static_cast<std::int64_t>(server_seconds * 1e9);
+        }
         c.kind = kind;
         if (status.ok()) {
             c.code = "OK";
@@ -908,10 +914,15 @@ void run_review(Shared& shared, Recorder& rec, const std::string& server, const 
                 continue;
             }
             status = review.send_pose(sequence, review_pose_at(model, index, count, step));
+            double server_seconds = -1.0;
             if (status.ok()) {
-                status = review.wait_result(sequence, {}, wait).status();
+                auto result = review.wait_result(sequence, {}, wait);
+                status = result.status();
+                if (result.ok()) {
+                    server_seconds = result->server_seconds;
+                }
             }
-            rec.record(review_pose, *due, status);
+            rec.record(review_pose, *due, status, server_seconds);
         }
         if (!status.ok()) {
             review.cancel();
@@ -978,6 +989,15 @@ void run_metrics(Shared& shared, const std::vector<MetricsTarget>& targets,
 std::int64_t rank(const std::vector<std::int64_t>& sorted, double q) {
     const auto k = static_cast<std::size_t>(std::ceil(q * static_cast<double>(sorted.size())));
     return sorted[std::min(sorted.size() - 1, k == 0 ? 0 : k - 1)];
+}
+
+// p50, p90, p99, p99.9 and max of sorted, non-empty nanoseconds.
+nlohmann::json percentiles_json(const std::vector<std::int64_t>& sorted) {
+    return {{"p50", rank(sorted, 0.50)},
+            {"p90", rank(sorted, 0.90)},
+            {"p99", rank(sorted, 0.99)},
+            {"p99.9", rank(sorted, 0.999)},
+            {"max", sorted.back()}};
 }
 
 // ghz's report fields (runner.Report) for these calls over `seconds` of measured time.
@@ -1052,11 +1072,19 @@ nlohmann::json ghz_json(const std::vector<const Call*>& calls, double seconds) {
         distribution.push_back({{"percentage", p}, {"latency", rank(latencies, p / 100.0)}});
     }
     j["latencyDistribution"] = distribution;
-    j["percentiles"] = {{"p50", rank(latencies, 0.50)},
-                        {"p90", rank(latencies, 0.90)},
-                        {"p99", rank(latencies, 0.99)},
-                        {"p99.9", rank(latencies, 0.999)},
-                        {"max", slowest}};
+    j["percentiles"] = percentiles_json(latencies);
+    // Not in ghz: the daemon's own time for the calls that report it (review poses), so a
+    // reader can tell service time from queueing and transport.
+    std::vector<std::int64_t> server;
+    for (const auto* c : calls) {
+        if (c->server >= 0) {
+            server.push_back(c->server);
+        }
+    }
+    if (!server.empty()) {
+        std::sort(server.begin(), server.end());
+        j["serverPercentiles"] = percentiles_json(server);
+    }
     return j;
 }
 
@@ -1212,6 +1240,15 @@ void print_summary(const nlohmann::json& doc) {
         row(name, k);
     }
     row("all", doc);
+    for (const auto& [name, k] : doc["kinds"].items()) {
+        if (k.contains("serverPercentiles")) {
+            const auto& p = k["serverPercentiles"];
+            std::printf("%s: the daemon's own time p50 %s p90 %s p99 %s p99.9 %s max %s ms\n",
+                        name.c_str(), ms_text(p["p50"]).c_str(), ms_text(p["p90"]).c_str(),
+                        ms_text(p["p99"]).c_str(), ms_text(p["p99.9"]).c_str(),
+                        ms_text(p["max"]).c_str());
+        }
+    }
     if (!doc["errorDistribution"].empty()) {
         std::printf("errors:\n");
         int shown = 0;

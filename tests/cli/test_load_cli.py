@@ -131,6 +131,14 @@ class LoadCli(unittest.TestCase):
         self.assertEqual(set(doc["kinds"]), KINDS, doc["kinds"].keys())
         for name, k in doc["kinds"].items():
             self.check_ghz(name, k)
+        # Review poses carry the daemon's own time: ordered, and within each pose's latency
+        # (which adds the queueing and the transport), so no percentile above the latency's.
+        pose = doc["kinds"]["review_pose"]
+        sp = pose["serverPercentiles"]
+        self.assertTrue(0 < sp["p50"] <= sp["p90"] <= sp["p99"] <= sp["p99.9"] <= sp["max"], sp)
+        for q in ("p50", "p90", "p99", "p99.9", "max"):
+            self.assertLessEqual(sp[q], pose["percentiles"][q], q)
+        self.assertNotIn("serverPercentiles", doc["kinds"]["sim_frame"])
         # The top level is a ghz report over every kind.
         self.check_ghz("all", doc)
         self.assertEqual(doc["count"], sum(k["count"] for k in doc["kinds"].values()))
