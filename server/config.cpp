@@ -119,6 +119,8 @@ StatusOr<ServerConfig> apply_json_config(const nlohmann::json& json, ServerConfi
             s = read_unsigned(value, key, base.limits.max_frames_in_flight);
         } else if (key == "drain-seconds") {
             s = read_seconds(value, key, base.drain_seconds);
+        } else if (key == "review-peer-interval") {
+            s = read_seconds(value, key, base.review_peer_interval);
         } else if (key == "log-level") {
             s = read_string(value, key, base.log_level);
         } else if (key == "worker-threads") {
@@ -206,6 +208,10 @@ Status validate_config(const ServerConfig& config) {
     if (!std::isfinite(config.drain_seconds) || config.drain_seconds < 0) {
         return invalid_argument("drain-seconds must be a finite number >= 0");
     }
+    if (!std::isfinite(config.review_peer_interval) || config.review_peer_interval < 0 ||
+        config.review_peer_interval > 1) {
+        return invalid_argument("review-peer-interval must be a number of seconds in 0..1");
+    }
     bool level_ok = false;
     for (const char* level : LOG_LEVELS) {
         level_ok = level_ok || config.log_level == level;
@@ -267,6 +273,7 @@ nlohmann::json config_json(const ServerConfig& c) {
             {"max-message-bytes", c.limits.max_message_bytes},
             {"max-frames-in-flight", c.limits.max_frames_in_flight},
             {"drain-seconds", c.drain_seconds},
+            {"review-peer-interval", c.review_peer_interval},
             {"log-level", c.log_level},
             {"worker-threads", c.worker_threads},
             {"gpu", c.gpu},
@@ -369,6 +376,11 @@ ConfigOutcome load_config(int argc, char** argv) {
                        "cancelled")
             ->default_str("10"),
         [&](ServerConfig& c) { c.drain_seconds = flags.drain_seconds; });
+    add(app.add_option("--review-peer-interval", flags.review_peer_interval,
+                       "review rooms: a member's pending peer updates go out together at most "
+                       "once per this many seconds (0..1; 0: each at once)")
+            ->default_str("0.02"),
+        [&](ServerConfig& c) { c.review_peer_interval = flags.review_peer_interval; });
     add(app.add_option("--log-level", flags.log_level,
                        "trace, debug, info, warn, error, critical or off (logs go to stderr)")
             ->default_str(defaults.log_level),

@@ -43,6 +43,9 @@ struct ServerConfig {
     std::string models_dir;
     // The budget M of the one geometry cache shared by every model, verification and review room.
     std::uint64_t cache_bytes = massive::DEFAULT_CACHE_BYTES;
+    // Review rooms: a member's pending peer updates go out together at most once per this many
+    // seconds (its own answers, edits, joins and leaves at once); 0 sends each as it comes.
+    double review_peer_interval = 0.02;
 
     // Security (docs/server.md "Security"). TLS is on when both PEM files are given; with a
     // client CA every client must present a certificate it signed (mutual TLS).

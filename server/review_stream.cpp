@@ -61,13 +61,18 @@ class ReviewReactor final : public OrderedStream<v1::ReviewRequest, v1::ReviewEv
     std::mutex& mutex() override { return m_member->mu; }
 
     bool next_write_locked(v1::ReviewEvent* out, bool* answers) override {
-        auto item = m_member->outbox.pop();
-        if (!item) {
-            return false;
+        auto next = m_member->outbox.pop(Outbox::Clock::now());
+        if (!next) {
+            return false;  // empty, or peer updates waiting for company (the flusher comes back)
         }
         out->Clear();
-        wire::encode_room_event(item->event, out);
-        *answers = item->own;
+        if (next->item) {
+            wire::encode_room_event(next->item->event, out);
+            *answers = next->item->own;
+        } else {
+            wire::encode_peer_updates(next->peers, out);
+            *answers = false;
+        }
         return true;
     }
 

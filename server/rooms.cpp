@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <utility>
+#include <vector>
 
 #include <spdlog/spdlog.h>
 
@@ -34,18 +35,37 @@ void Outbox::drop_peer(const std::string& member) {
     }
 }
 
-std::optional<Outbox::Item> Outbox::pop() {
+std::optional<Outbox::Next> Outbox::pop(Clock::time_point now) {
     if (m_items.empty()) {
         return std::nullopt;
     }
-    auto node = m_items.extract(m_items.begin());
-    Item item = std::move(node.mapped());
-    if (const auto* peer = std::get_if<PeerEvent>(&item.event)) {
-        m_peer_slot.erase(peer->member);
-    } else {
+    Next next;
+    if (!std::holds_alternative<PeerEvent>(m_items.begin()->second.event)) {
+        auto node = m_items.extract(m_items.begin());
+        next.item = std::move(node.mapped());
         --m_ordered;
+        return next;
     }
-    return item;
+    // Updates at the front wait for company until their interval has passed, unless an ordered
+    // event waits behind them (it must not wait, and they go before it).
+    if (m_ordered == 0 && now < m_peers_after) {
+        return std::nullopt;
+    }
+    while (!m_items.empty()) {
+        auto* peer = std::get_if<PeerEvent>(&m_items.begin()->second.event);
+        if (peer == nullptr) {
+            break;
+        }
+        m_peer_slot.erase(peer->member);
+        next.peers.push_back(std::move(*peer));
+        m_items.erase(m_items.begin());
+    }
+    m_peers_after = now + m_peer_interval;
+    return next;
+}
+
+bool Outbox::peers_due(Clock::time_point now) const {
+    return !m_peer_slot.empty() && now >= m_peers_after;
 }
 
 // --- delivery ----------------------------------------------------------------------------------
@@ -147,6 +167,58 @@ StatusOr<EditEvent> Room::apply_edit(RoomMember& editor, const RoomEdit& edit) {
 }
 
 // --- RoomRegistry ------------------------------------------------------------------------------
+
+RoomRegistry::RoomRegistry(std::size_t max_events, Outbox::Clock::duration peer_interval)
+    : m_max_events(max_events), m_peer_interval(peer_interval) {
+    if (m_peer_interval > Outbox::Clock::duration::zero()) {
+        m_flusher = std::thread([this] { flush_loop(); });
+    }
+}
+
+RoomRegistry::~RoomRegistry() {
+    {
+        std::lock_guard lock(m_flush_mu);
+        m_stop = true;
+    }
+    m_flush_cv.notify_all();
+    if (m_flusher.joinable()) {
+        m_flusher.join();
+    }
+}
+
+void RoomRegistry::flush_loop() {
+    std::unique_lock lock(m_flush_mu);
+    while (!m_flush_cv.wait_for(lock, m_peer_interval / 2, [this] { return m_stop; })) {
+        lock.unlock();
+        flush_due();
+        lock.lock();
+    }
+}
+
+void RoomRegistry::flush_due() {
+    std::vector<std::shared_ptr<Room>> rooms;
+    {
+        std::lock_guard lock(m_mu);
+        rooms.reserve(m_rooms.size());
+        for (const auto& [name, room] : m_rooms) {
+            rooms.push_back(room);
+        }
+    }
+    std::vector<std::shared_ptr<RoomMember>> members;
+    for (const auto& room : rooms) {
+        {
+            std::lock_guard lock(room->m_mu);
+            members = room->m_members;
+        }
+        const auto now = Outbox::Clock::now();
+        for (const auto& m : members) {
+            std::lock_guard lock(m->mu);
+            if (!m->closed && m->sink != nullptr && m->outbox.peers_due(now)) {
+                m->sink->events_ready_locked();
+            }
+        }
+    }
+}
 
 StatusOr<std::shared_ptr<Room>> RoomRegistry::join(
     const std::string& room_name, const std::shared_ptr<const ModelEntry>& model,

@@ -14,11 +14,17 @@
 //   Ordered events (its own answers, edits, joins and leaves) queue up to a bound; a member that
 //   falls that far behind is disconnected (RESOURCE_EXHAUSTED) rather than slowing the room down
 //   or growing the daemon's memory. Peer pose updates coalesce: a member that has not yet taken a
-//   peer's update gets the newest one in its place (at most one pending update per peer).
+//   peer's update gets the newest one in its place (at most one pending update per peer). And
+//   they wait for company: a member's pending updates go out together (one `peers` message) at
+//   most once per peer interval, or at once ahead of an ordered event; the registry's flusher
+//   thread sends those whose interval has passed. With 64 members posing 5 times a second that
+//   is ~50 messages a second per member instead of ~315.
 //
 // Lock order: RoomRegistry::m_mu, then Room::edit_mu, then Room::mu, then RoomMember::mu (each
 // may be skipped). A member's stream never takes a room lock while it holds its own.
 
+#include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -26,6 +32,7 @@
 #include <optional>
 #include <shared_mutex>
 #include <string>
+#include <thread>
 #include <unordered_map>
 #include <variant>
 #include <vector>
@@ -59,11 +66,20 @@ using RoomEdit = massive::ReviewEditRequest;
 // RoomMember::mu.
 class Outbox {
   public:
+    using Clock = std::chrono::steady_clock;
     struct Item {
         RoomEvent event;
         bool own = false;  // answers one of this member's requests (join, pose, edit)
     };
-    explicit Outbox(std::size_t max_ordered) : m_max_ordered(max_ordered) {}
+    // What goes out next: an ordered event (`item`), or the peer updates queued ahead of any
+    // ordered one, together, oldest first (`peers`).
+    struct Next {
+        std::optional<Item> item;
+        std::vector<PeerEvent> peers;
+    };
+    // `peer_interval`: peer updates go out together at most once per this long (zero: no wait).
+    explicit Outbox(std::size_t max_ordered, Clock::duration peer_interval = {})
+        : m_max_ordered(max_ordered), m_peer_interval(peer_interval) {}
 
     // An ordered event; false (and nothing queued) when max_ordered are already waiting.
     bool push(RoomEvent event, bool own);
@@ -71,13 +87,19 @@ class Outbox {
     void push_peer(PeerEvent event);
     // Forgets a peer's pending update (it left the room).
     void drop_peer(const std::string& member);
-    std::optional<Item> pop();
+    // The next message, or nothing when the outbox is empty or holds only peer updates whose
+    // interval has not passed at `now` (peers_due() tells when it has).
+    std::optional<Next> pop(Clock::time_point now);
+    // Peer updates wait that pop() would hand out at `now`.
+    bool peers_due(Clock::time_point now) const;
     bool empty() const { return m_items.empty(); }
     std::size_t size() const { return m_items.size(); }
     std::size_t ordered() const { return m_ordered; }
 
   private:
     std::size_t m_max_ordered;
+    Clock::duration m_peer_interval;
+    Clock::time_point m_peers_after{};  // the earliest time the next batch of updates may go
     std::uint64_t m_next = 0;
     std::map<std::uint64_t, Item> m_items;  // by arrival
     std::unordered_map<std::string, std::uint64_t> m_peer_slot;
@@ -94,7 +116,8 @@ class MemberSink {
 };
 
 struct RoomMember {
-    explicit RoomMember(std::size_t max_events) : outbox(max_events) {}
+    RoomMember(std::size_t max_events, Outbox::Clock::duration peer_interval)
+        : outbox(max_events, peer_interval) {}
 
     std::string name;  // set once, before the member joins a room
 
@@ -143,11 +166,16 @@ class Room {
 
 class RoomRegistry {
   public:
-    // `max_events`: each member's bound on ordered events waiting to be read.
-    explicit RoomRegistry(std::size_t max_events) : m_max_events(max_events) {}
+    // `max_events`: each member's bound on ordered events waiting to be read; `peer_interval`:
+    // how often at most a member's pending peer updates go out together (zero: each at once).
+    // A flusher thread sends the held ones when their interval has passed (none for zero).
+    explicit RoomRegistry(std::size_t max_events, Outbox::Clock::duration peer_interval = {});
+    ~RoomRegistry();
+    RoomRegistry(const RoomRegistry&) = delete;
+    RoomRegistry& operator=(const RoomRegistry&) = delete;
 
     std::shared_ptr<RoomMember> make_member() const {
-        return std::make_shared<RoomMember>(m_max_events);
+        return std::make_shared<RoomMember>(m_max_events, m_peer_interval);
     }
 
     // Adds `member` (its name and sink set) to room `room`, creating the room on `model` when it
@@ -168,9 +196,18 @@ class RoomRegistry {
     std::size_t size() const;
 
   private:
+    // Tells the stream of every member whose held peer updates are due (twice per interval).
+    void flush_loop();
+    void flush_due();
+
     const std::size_t m_max_events;
+    const Outbox::Clock::duration m_peer_interval;
     mutable std::mutex m_mu;
     std::unordered_map<std::string, std::shared_ptr<Room>> m_rooms;  // guarded by m_mu
+    std::mutex m_flush_mu;
+    std::condition_variable m_flush_cv;
+    bool m_stop = false;  // guarded by m_flush_mu
+    std::thread m_flusher;
 };
 
 }  // namespace proxima::server

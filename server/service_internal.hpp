@@ -51,7 +51,9 @@ struct ProximityService::Shared {
         : config(c),
           scenes(c.limits.max_scenes),
           models(c.models_dir, c.cache_bytes),
-          rooms(REVIEW_MAX_PENDING_EVENTS),
+          rooms(REVIEW_MAX_PENDING_EVENTS,
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double>(c.review_peer_interval))),
           pool(c.worker_threads != 0 ? c.worker_threads
                                      : std::max(4u, std::thread::hardware_concurrency())) {}
 

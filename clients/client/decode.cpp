@@ -113,13 +113,10 @@ RemoteVerifySummary decode_verify_summary(const v1::VerifyStats& stats) {
     return out;
 }
 
-StatusOr<ReviewEvent> decode_review_event(const v1::ReviewEvent& event) {
-    auto decoded = wire::decode_room_event(event);
-    if (!decoded.ok()) {
-        return decoded.status();
-    }
+namespace {
+
+ReviewEvent to_review_event(massive::RoomEvent& room_event) {
     ReviewEvent out;
-    auto& room_event = decoded.value();
     if (auto* e = std::get_if<massive::JoinedEvent>(&room_event)) {
         out.kind = ReviewEvent::Kind::joined;
         out.joined.room = std::move(e->room);
@@ -155,6 +152,29 @@ StatusOr<ReviewEvent> decode_review_event(const v1::ReviewEvent& event) {
     } else if (auto* l = std::get_if<massive::MemberLeftEvent>(&room_event)) {
         out.kind = ReviewEvent::Kind::member_left;
         out.member = std::move(l->member);
+    }
+    return out;
+}
+
+}  // namespace
+
+StatusOr<ReviewEvent> decode_review_event(const v1::ReviewEvent& event) {
+    auto decoded = wire::decode_room_event(event);
+    if (!decoded.ok()) {
+        return decoded.status();
+    }
+    return to_review_event(decoded.value());
+}
+
+StatusOr<std::vector<ReviewEvent>> decode_review_events(const v1::ReviewEvent& event) {
+    auto decoded = wire::decode_room_events(event);
+    if (!decoded.ok()) {
+        return decoded.status();
+    }
+    std::vector<ReviewEvent> out;
+    out.reserve(decoded->size());
+    for (auto& e : *decoded) {
+        out.push_back(to_review_event(e));
     }
     return out;
 }

@@ -20,5 +20,7 @@ RemoteModelList decode_model_list(const v1::ListModelsResponse& response);
 NamedObjectPair decode_object_pair(const v1::ObjectPairResult& pair);
 RemoteVerifySummary decode_verify_summary(const v1::VerifyStats& stats);
 StatusOr<ReviewEvent> decode_review_event(const v1::ReviewEvent& event);
+// Every event of a message: the one, or each update of a `peers` batch, in order.
+StatusOr<std::vector<ReviewEvent>> decode_review_events(const v1::ReviewEvent& event);
 
 }  // namespace proxima::client::detail

@@ -1020,41 +1020,52 @@ struct ReviewSession::Impl {
     Status final_status;  // guarded by mu
     std::thread reader;
 
+    // Queues one event the reader decoded (mu held).
+    void take_locked(std::unique_lock<std::mutex>& lock, StatusOr<ReviewEvent> decoded) {
+        if (decoded.ok() && decoded->kind == ReviewEvent::Kind::peer) {
+            // As the daemon's outbox does: a peer's update not yet taken is replaced by the
+            // newer one, at the end. So the reader never stops for peer updates, and the
+            // member's own answers never wait behind a backlog of them in the transport.
+            if (!discard) {
+                const auto stale = std::find_if(events.begin(), events.end(), [&](auto& e) {
+                    return e.ok() && e->kind == ReviewEvent::Kind::peer &&
+                           e->peer.member == decoded->peer.member;
+                });
+                if (stale != events.end()) {
+                    events.erase(stale);
+                }
+                events.push_back(std::move(decoded));
+                if (!result_only) {
+                    changed.notify_all();
+                }
+            }
+            return;
+        }
+        changed.wait(lock, [&] { return discard || ordered < MAX_QUEUED; });
+        if (!discard) {
+            const bool wake = !result_only || !decoded.ok() ||
+                              decoded->kind == ReviewEvent::Kind::result ||
+                              ordered + 1 >= MAX_QUEUED;
+            events.push_back(std::move(decoded));
+            ++ordered;
+            if (wake) {
+                changed.notify_all();
+            }
+        }
+    }
+
     void read_loop() {
         pb::ReviewEvent event;
         while (stream->Read(&event)) {
-            auto decoded = detail::decode_review_event(event);
-            const bool peer = decoded.ok() && decoded->kind == ReviewEvent::Kind::peer;
+            // A `peers` message holds several updates: each is taken as its own peer event.
+            auto decoded = detail::decode_review_events(event);
             std::unique_lock lock(mu);
-            if (peer) {
-                // As the daemon's outbox does: a peer's update not yet taken is replaced by the
-                // newer one, at the end. So the reader never stops for peer updates, and the
-                // member's own answers never wait behind a backlog of them in the transport.
-                if (!discard) {
-                    const auto stale = std::find_if(events.begin(), events.end(), [&](auto& e) {
-                        return e.ok() && e->kind == ReviewEvent::Kind::peer &&
-                               e->peer.member == decoded->peer.member;
-                    });
-                    if (stale != events.end()) {
-                        events.erase(stale);
-                    }
-                    events.push_back(std::move(decoded));
-                    if (!result_only) {
-                        changed.notify_all();
-                    }
-                }
+            if (!decoded.ok()) {
+                take_locked(lock, decoded.status());
                 continue;
             }
-            changed.wait(lock, [&] { return discard || ordered < MAX_QUEUED; });
-            if (!discard) {
-                const bool wake = !result_only || !decoded.ok() ||
-                                  decoded->kind == ReviewEvent::Kind::result ||
-                                  ordered + 1 >= MAX_QUEUED;
-                events.push_back(std::move(decoded));
-                ++ordered;
-                if (wake) {
-                    changed.notify_all();
-                }
+            for (auto& e : *decoded) {
+                take_locked(lock, std::move(e));
             }
         }
         Status status;

@@ -232,7 +232,13 @@ function bridge(ws, client, o) {
                      member: String(msg.member || ''), avatar: meshToProto(msg.avatar, 'avatar'),
                      tolerance: Number(msg.tolerance || 0), nearest: msg.nearest !== false };
       review = client.Review(metadata);
-      review.on('data', (e) => send({ type: 'review', event: reviewEventToJson(e) }));
+      // A `peers` message holds several updates: the page gets each as its own `peer` event.
+      review.on('data', (e) => {
+        const events = e.event === 'peers'
+          ? e.peers.updates.map((peer) => ({ event: 'peer', peer }))
+          : [e];
+        for (const one of events) send({ type: 'review', event: reviewEventToJson(one) });
+      });
       review.on('error', (err) => { fail('review', err); review = null; });
       review.on('end', () => { send({ type: 'review', event: { kind: 'end' } }); review = null; });
       review.write({ join });

@@ -16,6 +16,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -704,6 +705,97 @@ TEST_F(MassiveDaemon, SlowMembersGetCoalescedPosesThenAreDisconnected) {
     ASSERT_TRUE((*alice)->send_pose(POSES + 1, translation(0.5, 0.5, 0.5)).ok());
     EXPECT_TRUE((*alice)->wait_result(POSES + 1).ok());
     EXPECT_TRUE((*alice)->finish().ok());
+}
+
+// Peer updates wait for company (--review-peer-interval, 0.02 s by default): a reader on a raw
+// stub gets the updates of several posing members in `peers` messages, far fewer messages than
+// poses, each member's sequence increasing and its last pose always delivered.
+TEST_F(MassiveDaemon, PeerUpdatesArriveBatchedWithEachMembersLastPose) {
+    DaemonProcess daemon(daemon_args(*s_models));
+    ASSERT_TRUE(daemon.ok()) << daemon.error();
+    auto c = connect(daemon);
+    ASSERT_TRUE(c);
+    const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() +
+                         120s);  // a lost update fails, not hangs
+    auto stub = v1::Proximity::NewStub(
+        grpc::CreateChannel(daemon.address(), grpc::InsecureChannelCredentials()));
+    auto watcher = stub->Review(&context);
+    {
+        v1::ReviewRequest join;
+        join.mutable_join()->set_room("batched");
+        join.mutable_join()->set_model("plant");
+        join.mutable_join()->set_member("watcher");
+        set_mesh(avatar, join.mutable_join()->mutable_avatar());
+        ASSERT_TRUE(watcher->Write(join));
+        v1::ReviewEvent joined;
+        ASSERT_TRUE(watcher->Read(&joined));
+        ASSERT_TRUE(joined.has_joined());
+    }
+    const std::vector<std::string> names = {"ann", "bob", "cy"};
+    constexpr std::uint64_t POSES = 60;
+    std::vector<std::unique_ptr<client::ReviewSession>> posers;
+    for (const auto& name : names) {
+        auto s = c->join_review({"batched", "plant", name, avatar, 0.1, true});
+        ASSERT_TRUE(s.ok()) << s.status().to_string();
+        posers.push_back(std::move(s).value());
+    }
+    // The watcher reads on its own thread while the members pose, one after the other.
+    std::map<std::string, std::uint64_t> last;
+    std::uint64_t messages = 0;
+    std::uint64_t batches = 0;
+    std::uint64_t updates = 0;
+    bool in_order = true;
+    std::thread reader([&] {
+        v1::ReviewEvent event;
+        auto take = [&](const v1::PeerUpdate& u) {
+            in_order = in_order && u.sequence() > last[u.member()];
+            last[u.member()] = u.sequence();
+            ++updates;
+        };
+        while (watcher->Read(&event)) {
+            if (event.has_peer()) {
+                ++messages;
+                take(event.peer());
+            } else if (event.has_peers()) {
+                ++messages;
+                ++batches;
+                std::set<std::string> members;
+                for (const auto& u : event.peers().updates()) {
+                    members.insert(u.member());
+                    take(u);
+                }
+                in_order = in_order &&
+                           members.size() == static_cast<std::size_t>(event.peers().updates_size());
+            }
+            if (last["ann"] == POSES && last["bob"] == POSES && last["cy"] == POSES) {
+                return;
+            }
+        }
+    });
+    for (std::uint64_t k = 1; k <= POSES; ++k) {
+        for (std::size_t m = 0; m < posers.size(); ++m) {
+            const double x = 0.01 * static_cast<double>(k) + 0.3 * static_cast<double>(m);
+            ASSERT_TRUE(posers[m]->send_pose(k, translation(x, 0.5, 0.5)).ok());
+            auto r = posers[m]->wait_result(k, {}, 5s);
+            ASSERT_TRUE(r.ok()) << r.status().to_string();
+        }
+    }
+    reader.join();
+    EXPECT_TRUE(in_order) << "a member twice in a batch, or a sequence going back";
+    for (const auto& name : names) {
+        EXPECT_EQ(last[name], POSES) << name << "'s last pose never reached the watcher";
+    }
+    EXPECT_GT(batches, 0u) << "no update went together with another";
+    EXPECT_LT(messages, names.size() * POSES / 2)
+        << messages << " messages for " << updates << " updates of " << names.size() * POSES
+        << " poses: updates are not held for company";
+    for (auto& p : posers) {
+        EXPECT_TRUE(p->finish().ok());
+    }
+    context.TryCancel();
+    (void)watcher->Finish();
 }
 
 TEST_F(MassiveDaemon, CorruptChunkIsDataLossAndTheDaemonServesOn) {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <unistd.h>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -84,6 +85,7 @@ TEST(ServerConfig, JsonErrorsNameTheKey) {
         {R"({"max-scenes": 1.5})", "max-scenes"},      // not whole
         {R"({"cache-bytes": -1})", "cache-bytes"},
         {R"({"log-level": 3})", "log-level"},
+        {R"({"review-peer-interval": "fast"})", "review-peer-interval"},
         {R"([1, 2])", ""},  // not an object
     };
     for (const auto& [text, key] : bad) {
@@ -114,6 +116,16 @@ TEST(ServerConfig, ValidationRefusesBadValues) {
     c = {};
     c.log_format = "xml";
     EXPECT_FALSE(validate_config(c).ok());
+    for (double interval : {-0.01, 1.5, std::nan("")}) {
+        c = {};
+        c.review_peer_interval = interval;
+        const Status s = validate_config(c);
+        EXPECT_FALSE(s.ok()) << interval;
+        EXPECT_NE(s.message().find("review-peer-interval"), std::string::npos) << s.message();
+    }
+    c = {};
+    c.review_peer_interval = 0;  // each update at once
+    EXPECT_TRUE(validate_config(c).ok());
 }
 
 TEST(ServerConfig, ConfigJsonRoundTrips) {

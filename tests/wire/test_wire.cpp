@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 #include <random>
+#include <span>
 #include <tuple>
 #include <variant>
 
@@ -1039,6 +1040,45 @@ TEST(Wire, RoomEventsFromTheDaemonDecodeOnTheClient) {
     EXPECT_EQ(event->peer.summary.nearest_object, 4u);
     EXPECT_EQ(event->peer.summary.nearest_distance, 0.25);
     EXPECT_EQ(event->peer.model_version, 8u);
+
+    // peer updates sent together: one goes as `peer`, several as `peers`, and a reader takes
+    // them as that many peer events in order (a single-event decode refuses a batch)
+    std::vector<massive::PeerEvent> batch = {peer, peer, peer};
+    batch[1].member = "carol";
+    batch[1].pose.sequence = 6;
+    batch[2].member = "dave";
+    batch[2].pose.sequence = 7;
+    message.Clear();
+    wire::encode_peer_updates(std::span(batch).first(1), &message);
+    EXPECT_TRUE(message.has_peer());
+    message.Clear();
+    wire::encode_peer_updates(batch, &message);
+    ASSERT_TRUE(message.has_peers());
+    EXPECT_EQ(message.peers().updates_size(), 3);
+    auto events = detail::decode_review_events(reparse(message));
+    ASSERT_TRUE(events.ok()) << events.status().to_string();
+    ASSERT_EQ(events->size(), 3u);
+    for (std::size_t k = 0; k < 3; ++k) {
+        EXPECT_EQ((*events)[k].kind, client::ReviewEvent::Kind::peer);
+        EXPECT_EQ((*events)[k].peer.member, batch[k].member);
+        EXPECT_EQ((*events)[k].peer.sequence, batch[k].pose.sequence);
+        EXPECT_EQ((*events)[k].peer.transform.m, awkward_transform().m);
+        EXPECT_EQ((*events)[k].peer.model_version, 8u);
+    }
+    EXPECT_EQ(detail::decode_review_event(message).status().code(), StatusCode::internal);
+    message.mutable_peers()->mutable_updates(1)->clear_transform();
+    EXPECT_EQ(detail::decode_review_events(message).status().code(), StatusCode::internal)
+        << "one malformed update spoils the batch";
+    message.Clear();
+    message.mutable_peers();
+    EXPECT_EQ(detail::decode_review_events(message).status().code(), StatusCode::internal)
+        << "an empty batch";
+    // Any other event is one event.
+    message.Clear();
+    wire::encode_room_event(peer, &message);
+    events = detail::decode_review_events(message);
+    ASSERT_TRUE(events.ok());
+    EXPECT_EQ(events->size(), 1u);
 
     // edit_applied, every kind
     for (const auto kind :

@@ -325,7 +325,12 @@ class ReviewSession:
     def _read(self) -> None:
         try:
             for event in self._call:
-                self._events.put(event)
+                if event.WhichOneof("event") == "peers":
+                    # Several peers' updates in one message: each is its own "peer" event.
+                    for update in event.peers.updates:
+                        self._events.put(pb.ReviewEvent(peer=update))
+                else:
+                    self._events.put(event)
             self._events.put(None)
         except grpc.RpcError as e:
             self._events.put(ProximaError.from_rpc(e))

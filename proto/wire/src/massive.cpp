@@ -343,7 +343,39 @@ Status decode_pose(std::uint64_t sequence, const v1::Transform& transform,
     return {};
 }
 
+void encode_peer(const massive::PeerEvent& e, v1::PeerUpdate* p) {
+    p->set_member(e.member);
+    p->set_sequence(e.pose.sequence);
+    encode_transform(e.pose.transform, p->mutable_transform());
+    encode_summary(e.pose.summary, p->mutable_summary());
+    p->set_model_version(e.pose.model_version);
+}
+
+StatusOr<massive::PeerEvent> decode_peer(const v1::PeerUpdate& p) {
+    massive::PeerEvent out;
+    out.member = p.member();
+    if (Status s = decode_pose(p.sequence(), p.transform(), p.summary(),
+                               "peer '" + p.member() + "'", &out.pose);
+        !s.ok()) {
+        return s;
+    }
+    out.pose.model_version = p.model_version();
+    return out;
+}
+
 }  // namespace
+
+void encode_peer_updates(std::span<const massive::PeerEvent> peers, v1::ReviewEvent* out) {
+    if (peers.size() == 1) {
+        encode_peer(peers[0], out->mutable_peer());
+        return;
+    }
+    auto* batch = out->mutable_peers();
+    batch->mutable_updates()->Reserve(static_cast<int>(peers.size()));
+    for (const auto& p : peers) {
+        encode_peer(p, batch->add_updates());
+    }
+}
 
 void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out) {
     if (const auto* e = std::get_if<massive::JoinedEvent>(&event)) {
@@ -388,12 +420,7 @@ void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out) {
         st->set_server_seconds(e->server_seconds);
         r->set_model_version(e->model_version);
     } else if (const auto* e = std::get_if<massive::PeerEvent>(&event)) {
-        auto* p = out->mutable_peer();
-        p->set_member(e->member);
-        p->set_sequence(e->pose.sequence);
-        encode_transform(e->pose.transform, p->mutable_transform());
-        encode_summary(e->pose.summary, p->mutable_summary());
-        p->set_model_version(e->pose.model_version);
+        encode_peer(*e, out->mutable_peer());
     } else if (const auto* e = std::get_if<massive::EditEvent>(&event)) {
         auto* a = out->mutable_edit_applied();
         a->set_member(e->member);
@@ -458,17 +485,15 @@ StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event) {
             return massive::RoomEvent(std::move(o));
         }
         case v1::ReviewEvent::kPeer: {
-            const auto& p = event.peer();
-            massive::PeerEvent out;
-            out.member = p.member();
-            if (Status s = decode_pose(p.sequence(), p.transform(), p.summary(),
-                                       "peer '" + p.member() + "'", &out.pose);
-                !s.ok()) {
-                return s;
+            auto peer = decode_peer(event.peer());
+            if (!peer.ok()) {
+                return peer.status();
             }
-            out.pose.model_version = p.model_version();
-            return massive::RoomEvent(std::move(out));
+            return massive::RoomEvent(std::move(peer).value());
         }
+        case v1::ReviewEvent::kPeers:
+            return malformed_answer("a batch of " + std::to_string(event.peers().updates_size()) +
+                                    " peer updates where one event was expected");
         case v1::ReviewEvent::kEditApplied: {
             const auto& e = event.edit_applied();
             massive::EditEvent out;
@@ -507,6 +532,30 @@ StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event) {
         default:
             return malformed_answer("an empty review event");
     }
+}
+
+StatusOr<std::vector<massive::RoomEvent>> decode_room_events(const v1::ReviewEvent& event) {
+    std::vector<massive::RoomEvent> out;
+    if (event.event_case() != v1::ReviewEvent::kPeers) {
+        auto one = decode_room_event(event);
+        if (!one.ok()) {
+            return one.status();
+        }
+        out.push_back(std::move(one).value());
+        return out;
+    }
+    if (event.peers().updates().empty()) {
+        return malformed_answer("an empty batch of peer updates");
+    }
+    out.reserve(static_cast<std::size_t>(event.peers().updates_size()));
+    for (const auto& p : event.peers().updates()) {
+        auto peer = decode_peer(p);
+        if (!peer.ok()) {
+            return peer.status();
+        }
+        out.emplace_back(std::move(peer).value());
+    }
+    return out;
 }
 
 // --- FetchRegion ---------------------------------------------------------------------------

@@ -3,7 +3,9 @@
 // stream (requests from the client, room events from the daemon) and FetchRegion, in both
 // directions.
 
+#include <span>
 #include <string>
+#include <vector>
 
 #include "proxima/massive/region.hpp"
 #include "proxima/massive/review.hpp"
@@ -48,8 +50,14 @@ StatusOr<massive::ReviewRequest> decode_review_request(const v1::ReviewRequest& 
 // --- Review: room events (daemon -> client) ---
 
 void encode_room_event(const massive::RoomEvent& event, v1::ReviewEvent* out);
-// A malformed event (empty, an unknown edit kind, a bad transform) is an internal error.
+// Peer updates sent together (oldest first): one as `peer`, several as `peers`.
+void encode_peer_updates(std::span<const massive::PeerEvent> peers, v1::ReviewEvent* out);
+// A malformed event (empty, an unknown edit kind, a bad transform) is an internal error; so is
+// a `peers` batch here (decode_room_events takes those).
 StatusOr<massive::RoomEvent> decode_room_event(const v1::ReviewEvent& event);
+// Every event a message holds, in order: the one event, or each update of a `peers` batch as a
+// PeerEvent (an empty batch is malformed).
+StatusOr<std::vector<massive::RoomEvent>> decode_room_events(const v1::ReviewEvent& event);
 
 // --- FetchRegion ---
 
