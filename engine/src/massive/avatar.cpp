@@ -259,7 +259,9 @@ StatusOr<std::unique_ptr<AvatarTracker>> AvatarTracker::create(std::shared_ptr<M
     std::unique_ptr<AvatarTracker> t(new AvatarTracker());
     t->m_view = std::move(view);
     t->m_mesh = std::move(avatar);
-    t->m_tree = std::make_unique<LazyBvh>(t->m_mesh.vertices, t->m_mesh.triangles);
+    // Single-triangle leaves (LazyBvh's constructor says why): an avatar has few triangles.
+    t->m_tree = std::make_unique<LazyBvh>(t->m_mesh.vertices, t->m_mesh.triangles, nullptr,
+                                          std::span<const std::uint32_t>{}, 1);
     t->m_id = id;
     return t;
 }

@@ -14,10 +14,12 @@ namespace proxima::massive {
 // LazyBvh
 
 LazyBvh::LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices> triangles,
-                 std::atomic<std::int64_t>* bytes, std::span<const std::uint32_t> source)
+                 std::atomic<std::int64_t>* bytes, std::span<const std::uint32_t> source,
+                 std::uint32_t leaf_size)
     : m_vertices(vertices),
       m_triangles(triangles),
       m_source(source),
+      m_leaf_size(std::max<std::uint32_t>(1, leaf_size)),
       m_order(triangles.size()),
       m_bytes(bytes) {
     for (std::uint32_t t = 0; t < m_order.size(); ++t) {
@@ -45,7 +47,7 @@ std::uint32_t LazyBvh::expand_above(std::uint32_t count) {
     while (!stack.empty()) {
         const Node* n = stack.back();
         stack.pop_back();
-        if (n->leaf() || n->count <= count) {
+        if (leaf(*n) || n->count <= count) {
             continue;
         }
         auto [l, r] = children(*n);
@@ -237,12 +239,20 @@ struct PairSearch {
                          : std::tuple{na.min_source, nb.min_source, hit.triangle_a, hit.triangle_b};
         return first > best_first || (first == best_first && second >= best_second);
     }
+    // Whether child (d1, s1) goes before child (d0, s0): the nearer box first; between equally
+    // near ones (overlapping boxes, distance 0: contacts), the one with the smaller triangle
+    // index, so the tie a search at distance 0 must find (the smallest indices) comes early and
+    // cannot_beat_tie prunes the rest. Only the order of the visits: every pair that could win
+    // or tie is still visited, so the answer is the same.
+    static bool first_is_second(double d1, std::uint32_t s1, double d0, std::uint32_t s0) {
+        return d1 < d0 || (d1 == d0 && s1 < s0);
+    }
     void visit(const LazyBvh::Node& na, const Aabb& ba, const LazyBvh::Node& nb, const Aabb& bb) {
         if (box_squared_distance(ba, bb) > threshold() || cannot_beat_tie(na, nb)) {
             return;
         }
-        const bool la = na.leaf();
-        const bool lb = nb.leaf();
+        const bool la = a.bvh->leaf(na);
+        const bool lb = b.bvh->leaf(nb);
         if (la && lb) {
             leaves(na, nb);
             return;
@@ -252,7 +262,8 @@ struct PairSearch {
             auto [c0, c1] = a.bvh->children(na);
             Aabb b0 = node_box(a, *c0);
             Aabb b1 = node_box(a, *c1);
-            if (box_squared_distance(b1, bb) < box_squared_distance(b0, bb)) {
+            if (first_is_second(box_squared_distance(b1, bb), c1->min_source,
+                                box_squared_distance(b0, bb), c0->min_source)) {
                 std::swap(c0, c1);
                 std::swap(b0, b1);
             }
@@ -262,7 +273,8 @@ struct PairSearch {
             auto [c0, c1] = b.bvh->children(nb);
             Aabb b0 = node_box(b, *c0);
             Aabb b1 = node_box(b, *c1);
-            if (box_squared_distance(ba, b1) < box_squared_distance(ba, b0)) {
+            if (first_is_second(box_squared_distance(ba, b1), c1->min_source,
+                                box_squared_distance(ba, b0), c0->min_source)) {
                 std::swap(c0, c1);
                 std::swap(b0, b1);
             }

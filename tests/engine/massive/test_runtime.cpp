@@ -207,6 +207,43 @@ TEST(LazyBvh, ExpandsOnlyWhatIsVisited) {
     EXPECT_LT(tb.nodes_built(), 600u) << "nodes built: " << tb.nodes_built();
 }
 
+// The leaf size (an avatar's tree uses single-triangle leaves) changes nothing in the
+// answer: a box avatar against a sphere, touching (ties at distance 0,
+// broken both ways), crossing and apart, gives bit for bit the hit of the default tree.
+TEST(LazyBvh, LeafSizeDoesNotChangeTheAnswer) {
+    const TriangleMesh big = sphere_mesh({0, 0, 0}, 1.0, 32);
+    LazyBvh tb(big.vertices, big.triangles);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1.4, 1.4);
+    int touching = 0;
+    for (int k = 0; k < 200; ++k) {
+        const Vec3 c{u(rng), u(rng), u(rng)};
+        const double h = k % 2 == 0 ? 0.3 : 0.05;
+        const TriangleMesh box = box_mesh(c - Vec3{h, h, h}, c + Vec3{h, h, h}, 0.1 * k);
+        LazyBvh four(box.vertices, box.triangles);
+        LazyBvh one(box.vertices, box.triangles, nullptr, {}, 1);
+        for (const bool b_first : {false, true}) {
+            for (const double bound : {std::numeric_limits<double>::infinity(), 0.01}) {
+                const auto want = closest_pair({&tb, nullptr}, {&four, nullptr}, bound,
+                                               rounding_slack(2.0), b_first);
+                const auto got = closest_pair({&tb, nullptr}, {&one, nullptr}, bound,
+                                              rounding_slack(2.0), b_first);
+                ASSERT_EQ(got.found, want.found) << k;
+                if (!want.found) {
+                    continue;
+                }
+                touching += want.squared_distance == 0.0;
+                ASSERT_EQ(got.squared_distance, want.squared_distance) << k;
+                ASSERT_EQ(got.triangle_a, want.triangle_a) << k << " b_first " << b_first;
+                ASSERT_EQ(got.triangle_b, want.triangle_b) << k << " b_first " << b_first;
+                ASSERT_EQ(got.point_a, want.point_a) << k;
+                ASSERT_EQ(got.point_b, want.point_b) << k;
+            }
+        }
+    }
+    EXPECT_GT(touching, 20) << "too few crossing placements to test the ties";
+}
+
 namespace {
 
 // Every node of `a` and `b` below these two, expanding both as it goes: the same boxes, ranges,
@@ -219,7 +256,7 @@ void expect_same_subtree(LazyBvh& a, const LazyBvh::Node& na, LazyBvh& b, const 
     ASSERT_EQ(na.min_source, nb.min_source);
     ASSERT_EQ(na.box.lo, nb.box.lo);
     ASSERT_EQ(na.box.hi, nb.box.hi);
-    if (na.leaf()) {
+    if (a.leaf(na)) {
         for (std::uint32_t s = na.first; s < na.first + na.count; ++s) {
             ASSERT_EQ(a.triangle(s), b.triangle(s)) << "slot " << s;
         }

@@ -35,17 +35,21 @@ class LazyBvh {
         // 0 skip subtrees that cannot hold a smaller tied pair.
         std::uint32_t min_source = 0;
         std::atomic<std::uint32_t> left{NONE};  // right child is left + 1
-        bool leaf() const { return count <= LEAF_SIZE; }
     };
 
     // `bytes` (optional) is credited with the memory of every node built; `source` (optional)
-    // maps triangles to the indices results report (identity when empty).
+    // maps triangles to the indices results report (identity when empty); nodes of at most
+    // `leaf_size` (>= 1) triangles are leaves. An avatar's tree uses 1: its few, large triangles
+    // (a box's faces) grouped in fours have boxes as big as the avatar itself, so every object
+    // triangle inside the avatar's volume would be a candidate of every leaf.
     LazyBvh(std::span<const Vec3> vertices, std::span<const TriangleIndices> triangles,
-            std::atomic<std::int64_t>* bytes = nullptr, std::span<const std::uint32_t> source = {});
+            std::atomic<std::int64_t>* bytes = nullptr, std::span<const std::uint32_t> source = {},
+            std::uint32_t leaf_size = LEAF_SIZE);
     LazyBvh(const LazyBvh&) = delete;
     LazyBvh& operator=(const LazyBvh&) = delete;
 
     const Node& root() const { return node(0); }
+    bool leaf(const Node& n) const { return n.count <= m_leaf_size; }
     const Node& node(std::uint32_t i) const { return m_blocks[i / BLOCK][i % BLOCK]; }
     // The children of an inner node, built on first call.
     std::pair<const Node*, const Node*> children(const Node& n);
@@ -72,6 +76,7 @@ class LazyBvh {
     std::span<const Vec3> m_vertices;
     std::span<const TriangleIndices> m_triangles;
     std::span<const std::uint32_t> m_source;
+    std::uint32_t m_leaf_size;
     std::vector<std::uint32_t> m_order;
     std::vector<std::unique_ptr<Node[]>> m_blocks;  // sized for the worst case up front
     std::atomic<std::uint32_t> m_count{0};
