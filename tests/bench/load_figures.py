@@ -105,14 +105,17 @@ def review(a, proxima, proximad):
     print(f"### 64 review clients, 15M-triangle plant, M = 160 MB, {a.review_duration} "
           f"({a.review_rate} poses/s each, open loop)\n")
     print("| calls | errors | poses | pose p50 ms | p90 | p99 | p99.9 | max | "
+          "daemon's own time p50 / p99 / max ms | "
           "daemon RSS min-max MiB (samples) | daemon peak RSS MiB (VmHWM) | M + 256 MiB | "
           "daemon cores | harness cores |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|---:|---:|---:|")
     pc = pose.get("percentiles", {})
+    sp = pose.get("serverPercentiles", {})
     ep = doc["metrics"]["endpoints"][0]["summary"]
     print(f"| {doc['count']} | {errors} | {pose.get('count', 0)} | {ms(pc.get('p50'))} | "
           f"{ms(pc.get('p90'))} | {ms(pc.get('p99'))} | {ms(pc.get('p99.9'))} | "
-          f"{ms(pc.get('max'))} | {mib(min(rss) if rss else None)}-{mib(max(rss) if rss else None)}"
+          f"{ms(pc.get('max'))} | {ms(sp.get('p50'))} / {ms(sp.get('p99'))} / {ms(sp.get('max'))} | "
+          f"{mib(min(rss) if rss else None)}-{mib(max(rss) if rss else None)}"
           f" ({len(rss)}) | {mib(peak)} | {mib(M_BYTES + 256 * 2**20)} | "
           f"{ep.get('cpu_cores') or 0:.2f} | {doc['harness']['cpu_cores'] or 0:.2f} |\n")
 
