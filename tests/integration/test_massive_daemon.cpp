@@ -717,8 +717,8 @@ TEST_F(MassiveDaemon, PeerUpdatesArriveBatchedWithEachMembersLastPose) {
     ASSERT_TRUE(c);
     const NamedMesh avatar{"avatar", box_mesh({-0.15, -0.15, -0.15}, {0.15, 0.15, 0.15})};
     grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() +
-                         120s);  // a lost update fails, not hangs
+    // A lost update fails the test instead of hanging it.
+    context.set_deadline(std::chrono::system_clock::now() + 120s);
     auto stub = v1::Proximity::NewStub(
         grpc::CreateChannel(daemon.address(), grpc::InsecureChannelCredentials()));
     auto watcher = stub->Review(&context);
