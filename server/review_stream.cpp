@@ -9,7 +9,6 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <shared_mutex>
 #include <string>
 #include <utility>
 #include <variant>
@@ -193,17 +192,19 @@ class ReviewReactor final : public OrderedStream<v1::ReviewRequest, v1::ReviewEv
         PoseResult out;
         out.sequence = pose.sequence;
         {
-            // Shared: edits wait for this pose, so it sees exactly one model version.
-            std::shared_lock edit_lock(m_room->edit_mutex());
+            // One model version for the whole pose, names included: the view's current snapshot.
+            // An edit committed meanwhile makes a new one and never waits for this pose (nor
+            // this pose for it, however long the edit takes to prepare).
             const auto& view = *m_room->view();
-            out.model_version = view.version();
-            auto result = m_tracker->query(pose.transform, m_options, &m_cancel);
+            const auto at = view.snapshot();
+            out.model_version = at->version;
+            auto result = m_tracker->query(pose.transform, m_options, &m_cancel, at);
             if (!result.ok()) {
                 return result.status();
             }
             out.result = std::move(result).value();
             auto name = [&](std::uint32_t object) {
-                auto n = view.object_name(object);
+                auto n = view.object_name(*at, object);
                 return n.ok() ? std::move(n).value() : std::string();
             };
             for (const auto& h : out.result.collisions) {

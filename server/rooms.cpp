@@ -114,9 +114,9 @@ void Room::publish_pose(RoomMember& from, const MemberPose& pose) {
 }
 
 StatusOr<EditEvent> Room::apply_edit(RoomMember& editor, const RoomEdit& edit) {
-    // Exclusive: no pose is computing, so every result names exactly the version it saw; and
-    // edits reach every member in the order they were applied.
-    std::unique_lock edit_lock(m_edit_mu);
+    // One edit at a time, so edits reach every member in the order they were applied. Poses go
+    // on meanwhile, each on the snapshot it took (the version its result names).
+    std::lock_guard edit_lock(m_edit_mu);
     EditEvent event;
     event.member = editor.name;
     event.sequence = edit.sequence;
@@ -237,9 +237,9 @@ StatusOr<std::shared_ptr<Room>> RoomRegistry::join(
     } else {
         room = std::make_shared<Room>(room_name, model, cache);
     }
-    // Shared edit lock: an edit is either wholly before the join (in model_version) or wholly
+    // The edit lock: an edit is either wholly before the join (in model_version) or wholly
     // after it (and then reaches the new member as edit_applied).
-    std::shared_lock edit_lock(room->m_edit_mu);
+    std::lock_guard edit_lock(room->m_edit_mu);
     std::lock_guard room_lock(room->m_mu);
     for (const auto& m : room->m_members) {
         if (m->name == member->name) {

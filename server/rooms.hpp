@@ -8,8 +8,10 @@
 // - Every member sees the others: its own pose results, the other members' latest poses (with a
 //   summary of their results), every edit (its own included, in the one order the room applied
 //   them), and members joining and leaving.
-// - Each pose is computed on exactly one model version: poses hold the room's edit lock shared,
-//   edits hold it exclusively, so `model_version` in a result names the edits it saw.
+// - Each pose is computed on exactly one model version: the view's snapshot when the pose began
+//   (`model_version` in its result names the edits it saw). Edits are applied one at a time
+//   under the room's edit lock, which poses never take: an edit commits a new snapshot, and a
+//   slow one (a large object read and copied) holds up no pose.
 // - Delivery never blocks the sender and never grows without bound: each member has an Outbox.
 //   Ordered events (its own answers, edits, joins and leaves) queue up to a bound; a member that
 //   falls that far behind is disconnected (RESOURCE_EXHAUSTED) rather than slowing the room down
@@ -30,7 +32,6 @@
 #include <memory>
 #include <mutex>
 #include <optional>
-#include <shared_mutex>
 #include <string>
 #include <thread>
 #include <unordered_map>
@@ -142,9 +143,6 @@ class Room {
     const ModelEntry& model() const { return *m_model; }
     const std::shared_ptr<massive::ModelView>& view() const { return m_view; }
 
-    // Poses hold this shared for the whole query, edits exclusively.
-    std::shared_mutex& edit_mutex() { return m_edit_mu; }
-
     // Records the member's latest pose and sends it to every other member.
     void publish_pose(RoomMember& from, const MemberPose& pose);
     // Applies the edit to the room's view (all or nothing) and sends edit_applied to every
@@ -159,7 +157,11 @@ class Room {
     const std::string m_name;
     const std::shared_ptr<const ModelEntry> m_model;
     const std::shared_ptr<massive::ModelView> m_view;
-    std::shared_mutex m_edit_mu;
+    // Edits and joins, one at a time: an edit is applied and announced to the members of that
+    // moment before the next edit or join begins. Poses never take it (each queries one snapshot
+    // of the view), so a slow edit (reading a large object, evicting pieces for its copy) holds
+    // up no pose.
+    std::mutex m_edit_mu;
     mutable std::mutex m_mu;
     std::vector<std::shared_ptr<RoomMember>> m_members;  // guarded by m_mu, join order
 };

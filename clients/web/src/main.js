@@ -358,7 +358,8 @@ function onReviewEvent(e) {
     case 'result':
       state.pending = 0;
       state.lastResult = e;
-      state.modelVersion = e.model_version;
+      // A pose may have been computed on the version before an edit already shown.
+      state.modelVersion = Math.max(state.modelVersion, e.model_version);
       recolour();
       showResult(e);
       if (poseDirty) sendPose();

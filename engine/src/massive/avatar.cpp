@@ -78,8 +78,11 @@ bool ModelView::deleted(std::uint32_t object) const {
 }
 
 StatusOr<std::string> ModelView::object_name(std::uint32_t object) const {
-    auto s = snapshot();
-    for (const auto& o : s->overlay) {
+    return object_name(*snapshot(), object);
+}
+
+StatusOr<std::string> ModelView::object_name(const Snapshot& at, std::uint32_t object) const {
+    for (const auto& o : at.overlay) {
         if (o.object == object) {
             return o.name;
         }
@@ -311,13 +314,13 @@ struct AvatarTracker::Query {
     std::uint32_t current_piece = 0;
 
     Query(AvatarTracker& t, const Affine& pose, const AvatarQueryOptions& o, const CancelToken* c,
-          const Aabb& b)
+          const Aabb& b, std::shared_ptr<const ModelView::Snapshot> at)
         : tracker(t),
           options(o),
           cancel(c),
           box(b),
           avatar{t.m_tree.get(), nullptr, &pose, t.m_posed.data()},
-          snap(t.m_view->snapshot()),
+          snap(at != nullptr ? std::move(at) : t.m_view->snapshot()),
           store(t.m_view->store()),
           cache(*t.m_view->cache()),
           pieces(store->pieces()),
@@ -569,7 +572,8 @@ struct AvatarTracker::Query {
 };
 
 StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQueryOptions& options,
-                                            const CancelToken* cancel) {
+                                            const CancelToken* cancel,
+                                            std::shared_ptr<const ModelView::Snapshot> at) {
     if (!pose.finite()) {
         return invalid_argument("avatar pose has a non-finite entry");
     }
@@ -585,7 +589,7 @@ StatusOr<AvatarResult> AvatarTracker::query(const Affine& pose, const AvatarQuer
         m_posed[v] = pose.apply(m_mesh.vertices[v]);
     }
     const Aabb box = compute_box(m_posed);
-    Query q(*this, pose, options, cancel, box);
+    Query q(*this, pose, options, cancel, box, std::move(at));
     if (Status s = q.within_tolerance(); !s.ok()) {
         return s;
     }

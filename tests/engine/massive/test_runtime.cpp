@@ -646,8 +646,12 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
     const int poses = 12;
     std::uint64_t collisions = 0;
     double avatar_seconds = 0;
+    std::shared_ptr<const ModelView::Snapshot> before;  // the version before the edits
+    std::vector<TriangleMesh> objects_before;
     for (int k = 0; k < poses; ++k) {
         if (k == 6) {
+            before = view->snapshot();
+            objects_before = objects;
             // Edits: move object 0 next to the path, delete object 1, add a box on the path.
             const Vec3 at = box.lo + (box.hi - box.lo) * (double(k) / poses);
             Affine move;
@@ -695,6 +699,23 @@ TEST(Avatar, PathResultsEqualTheInMemoryEngineWithEdits) {
             check_against_engine(
                 *view, objects, posed, *r, tolerance,
                 "pose " + std::to_string(k) + " tolerance " + std::to_string(tolerance));
+            if (before != nullptr && k <= 7) {
+                // A query at the version before the edits sees none of them, and names its
+                // objects as of that version (object 1, deleted since, still has its name).
+                auto old = (*tracker)->query(pose, options, nullptr, before);
+                ASSERT_TRUE(old.ok());
+                check_against_engine(*view, objects_before, posed, *old, tolerance,
+                                     "pose " + std::to_string(k) + " at the version before");
+                EXPECT_EQ(view->object_name(*before, 1).value(), store->objects()[1].name);
+                EXPECT_FALSE(
+                    view->object_name(*before, static_cast<std::uint32_t>(objects.size() - 1)).ok())
+                    << "the added object does not exist in the version before";
+                EXPECT_EQ(view->object_name(*view->snapshot(),
+                                            static_cast<std::uint32_t>(objects.size() - 1))
+                              .value(),
+                          "added");
+                EXPECT_LT(before->version, view->version());
+            }
             // The nearest object within a radius: the same one when it is that close, none
             // otherwise.
             AvatarQueryOptions bounded = options;

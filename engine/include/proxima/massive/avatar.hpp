@@ -77,7 +77,10 @@ class ModelView {
         std::vector<OverlayObject> overlay;
         std::uint64_t version = 0;
     };
+    // The current version: queries on it see exactly its edits, however many edits follow.
     std::shared_ptr<const Snapshot> snapshot() const;
+    // An object's name as of version `at` (an object added then deleted later still has one).
+    StatusOr<std::string> object_name(const Snapshot& at, std::uint32_t object) const;
     double slack() const { return m_slack; }
 
   private:
@@ -129,8 +132,12 @@ class AvatarTracker {
     static StatusOr<std::unique_ptr<AvatarTracker>> create(std::shared_ptr<ModelView> view,
                                                            TriangleMesh avatar,
                                                            std::uint64_t id = 0);
+    // `at`: the model version to query (a snapshot of the view; null: the current one). A caller
+    // that names the version in its answer takes the snapshot first and queries at it: edits
+    // committed meanwhile do not change what this query sees.
     StatusOr<AvatarResult> query(const Affine& pose, const AvatarQueryOptions& options,
-                                 const CancelToken* cancel = nullptr);
+                                 const CancelToken* cancel = nullptr,
+                                 std::shared_ptr<const ModelView::Snapshot> at = nullptr);
     const std::vector<Vec3>& posed_vertices() const { return m_posed; }
 
   private:
