@@ -23,7 +23,8 @@
 //   is ~50 messages a second per member instead of ~315.
 //
 // Lock order: RoomRegistry::m_mu, then Room::edit_mu, then Room::mu, then RoomMember::mu (each
-// may be skipped). A member's stream never takes a room lock while it holds its own.
+// may be skipped); RoomRegistry::m_flush_mu is a leaf (nothing is taken while it is held). A
+// member's stream never takes a room lock while it holds its own.
 
 #include <chrono>
 #include <condition_variable>
@@ -198,9 +199,11 @@ class RoomRegistry {
     std::size_t size() const;
 
   private:
-    // Tells the stream of every member whose held peer updates are due (twice per interval).
+    // Tells the stream of every member whose held peer updates are due (twice per interval while
+    // any room exists; the thread sleeps while there is none).
     void flush_loop();
     void flush_due();
+    void rooms_changed_locked();  // with m_mu held: wakes the flusher when the first room opens
 
     const std::size_t m_max_events;
     const Outbox::Clock::duration m_peer_interval;
@@ -208,7 +211,8 @@ class RoomRegistry {
     std::unordered_map<std::string, std::shared_ptr<Room>> m_rooms;  // guarded by m_mu
     std::mutex m_flush_mu;
     std::condition_variable m_flush_cv;
-    bool m_stop = false;  // guarded by m_flush_mu
+    bool m_stop = false;           // guarded by m_flush_mu
+    std::size_t m_room_count = 0;  // guarded by m_flush_mu: m_rooms.size(), for the flusher
     std::thread m_flusher;
 };
 

@@ -145,57 +145,73 @@ const ModelView::OverlayObject* find_overlay(const ModelView::Snapshot& snap,
 }  // namespace
 
 Status ModelView::move_object(std::uint32_t object, const Affine& transform) {
+    auto prepared = prepare_move(object, transform);
+    if (!prepared.ok()) {
+        return prepared.status();
+    }
+    return commit_move(std::move(prepared).value());
+}
+
+StatusOr<ModelView::PreparedMove> ModelView::prepare_move(std::uint32_t object,
+                                                          const Affine& transform) const {
     if (!transform.finite()) {
         return invalid_argument("move: the transform has a non-finite entry");
     }
     if (deleted(object)) {
         return not_found("move: no object " + std::to_string(object) + " in the model");
     }
-    if (object < m_store->objects().size() && transform.m == Affine{}.m) {
-        // Back to the stored placement: the object reads from its stored pieces again, through
-        // the cache, and its in-memory copy (charged to the cache's budget) goes with the
-        // snapshots that hold it. The same geometry bit for bit: the identity map gives each
-        // stored coordinate back exactly.
-        std::unique_lock lock(m_mutex);
-        auto next = std::make_shared<Snapshot>(*m_snapshot);
-        std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
-        next->masked[object] = 0;
-        ++next->version;
-        m_snapshot = std::move(next);
-        return {};
-    }
-    // The stored (or as-added) coordinates under the new map.
-    TriangleMesh mesh;
-    std::string name;
-    if (object < m_store->objects().size()) {
-        auto m = read_object(*m_store, object);
-        if (!m.ok()) {
-            return m.status();
-        }
-        mesh = std::move(*m);
-        name = m_store->objects()[object].name;
-    } else {
+    if (object >= m_store->objects().size()) {
         return failed_precondition("move: object " + std::to_string(object) +
                                    " was added in this session; delete and add it again");
     }
-    for (auto& v : mesh.vertices) {
+    PreparedMove move;
+    move.object = object;
+    if (transform.m == Affine{}.m) {
+        // Back to the stored placement: the object reads from its stored pieces again, through
+        // the cache. The same geometry bit for bit: the identity map gives each stored coordinate
+        // back exactly.
+        move.back = true;
+        return move;
+    }
+    // The stored coordinates under the new map.
+    auto m = read_object(*m_store, object);
+    if (!m.ok()) {
+        return m.status();
+    }
+    move.mesh = std::move(m).value();
+    move.name = m_store->objects()[object].name;
+    for (auto& v : move.mesh.vertices) {
         v = transform.apply(v);
     }
-    if (Status s = validate_mesh(mesh, "moved object '" + name + "'"); !s.ok()) {
+    if (Status s = validate_mesh(move.mesh, "moved object '" + move.name + "'"); !s.ok()) {
         return s;
     }
+    return move;
+}
+
+Status ModelView::commit_move(PreparedMove move) {
+    std::lock_guard commit(m_commit_mutex);
     const auto current = snapshot();
-    auto o =
-        overlay_object(*m_cache, object, name, std::move(mesh), find_overlay(*current, object));
-    if (!o.ok()) {
-        return o.status();
+    const std::uint32_t object = move.object;
+    if (deleted(object)) {  // by an edit committed since the move was prepared
+        return not_found("move: no object " + std::to_string(object) + " in the model");
     }
-    std::unique_lock lock(m_mutex);
-    auto next = std::make_shared<Snapshot>(*m_snapshot);
+    auto next = std::make_shared<Snapshot>(*current);
     std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
-    next->overlay.push_back(std::move(o).value());
-    next->masked[object] = 1;
+    if (move.back) {
+        // The in-memory copy (charged to the cache's budget) goes with the snapshots that hold it.
+        next->masked[object] = 0;
+    } else {
+        auto o = overlay_object(*m_cache, object, std::move(move.name), std::move(move.mesh),
+                                find_overlay(*current, object));
+        if (!o.ok()) {
+            return o.status();
+        }
+        next->overlay.push_back(std::move(o).value());
+        next->masked[object] = 1;
+    }
     ++next->version;
+    std::unique_lock lock(m_mutex);
     m_snapshot = std::move(next);
     return {};
 }
@@ -204,48 +220,39 @@ StatusOr<std::uint32_t> ModelView::add_object(ModelObject object) {
     if (Status s = validate_mesh(object.mesh, "added object '" + object.name + "'"); !s.ok()) {
         return s;
     }
-    // The copy is charged (and may be refused) outside the lock, so the id is only proposed
-    // here and settled under the lock below: a refused add leaves the next id unused, as if it
-    // had never been asked.
-    std::uint32_t id = 0;
-    {
-        std::unique_lock lock(m_mutex);
-        id = static_cast<std::uint32_t>(m_store->objects().size());
-        for (const auto& o : m_snapshot->overlay) {
-            id = std::max(id, o.object + 1);
-        }
-        id = std::max(id, m_next_added);
+    std::lock_guard commit(m_commit_mutex);
+    const auto current = snapshot();
+    std::uint32_t id =
+        std::max(static_cast<std::uint32_t>(m_store->objects().size()), m_next_added);
+    for (const auto& o : current->overlay) {
+        id = std::max(id, o.object + 1);
     }
+    // A refused add (over the budget) leaves the id unused, as if it had never been asked.
     auto o = overlay_object(*m_cache, id, object.name, std::move(object.mesh), nullptr);
     if (!o.ok()) {
         return o.status();
     }
-    std::unique_lock lock(m_mutex);
-    auto next = std::make_shared<Snapshot>(*m_snapshot);
-    if (id < m_next_added) {
-        // Another add took that id meanwhile: this object gets the next one.
-        id = m_next_added;
-        o->object = id;
-        o->piece->object = id;
-    }
-    m_next_added = id + 1;
+    auto next = std::make_shared<Snapshot>(*current);
     next->overlay.push_back(std::move(o).value());
     ++next->version;
+    m_next_added = id + 1;
+    std::unique_lock lock(m_mutex);
     m_snapshot = std::move(next);
     return id;
 }
 
 Status ModelView::delete_object(std::uint32_t object) {
+    std::lock_guard commit(m_commit_mutex);
     if (deleted(object)) {
         return not_found("delete: no object " + std::to_string(object) + " in the model");
     }
-    std::unique_lock lock(m_mutex);
-    auto next = std::make_shared<Snapshot>(*m_snapshot);
+    auto next = std::make_shared<Snapshot>(*snapshot());
     std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
     if (object < next->masked.size()) {
         next->masked[object] = 1;
     }
     ++next->version;
+    std::unique_lock lock(m_mutex);
     m_snapshot = std::move(next);
     return {};
 }

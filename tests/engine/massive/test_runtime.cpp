@@ -871,3 +871,54 @@ TEST(Avatar, MovingObjectsAwayAndBackKeepsNoCopies) {
     EXPECT_TRUE(view->deleted(0));
     fs::remove_all(dir);
 }
+
+TEST(Avatar, PreparedMovesCommitInOrderAndNotAfterADelete) {
+    // A room prepares a move (the stored object read and transformed) outside its lock and
+    // commits it under the lock; edits committed in between decide what the commit may do.
+    const auto dir = temp_dir("avatar-prepared");
+    auto store = plant_store(dir, 40'000, 256ull << 10);
+    auto cache = std::make_shared<GeometryCache>(8ull << 20);
+    auto view = std::make_shared<ModelView>(store, cache);
+    ASSERT_GE(store->objects().size(), 3u);
+    Affine a;
+    a.m[3] = 0.3;
+    Affine b;
+    b.m[7] = -0.2;
+    // Two moves of object 1 prepared together: the later commit wins, and one copy is charged.
+    auto first = view->prepare_move(1, a);
+    auto second = view->prepare_move(1, b);
+    ASSERT_TRUE(first.ok() && second.ok());
+    EXPECT_EQ(view->version(), 0u) << "preparing changes nothing";
+    ASSERT_TRUE(view->commit_move(std::move(first).value()).ok());
+    const auto one_copy = cache->stats().charged_bytes;
+    EXPECT_GT(one_copy, 0);
+    ASSERT_TRUE(view->commit_move(std::move(second).value()).ok());
+    EXPECT_EQ(view->version(), 2u);
+    auto snap = view->snapshot();
+    ASSERT_EQ(snap->overlay.size(), 1u);
+    auto want = *read_object(*store, 1);
+    for (auto& v : want.vertices) {
+        v = b.apply(v);
+    }
+    EXPECT_EQ(snap->overlay[0].piece->geometry.vertices, want.vertices);
+    snap.reset();
+    EXPECT_EQ(cache->stats().charged_bytes, one_copy) << "the first copy went with its version";
+    // A move prepared before the object's deletion fails at commit and changes nothing.
+    auto late = view->prepare_move(2, a);
+    ASSERT_TRUE(late.ok());
+    ASSERT_TRUE(view->delete_object(2).ok());
+    const auto version = view->version();
+    auto failed = view->commit_move(std::move(late).value());
+    EXPECT_EQ(failed.code(), StatusCode::not_found);
+    EXPECT_EQ(view->version(), version);
+    EXPECT_TRUE(view->deleted(2));
+    // What prepare refuses: a non-finite map, a deleted object, an added object.
+    Affine bad;
+    bad.m[0] = std::nan("");
+    EXPECT_EQ(view->prepare_move(0, bad).status().code(), StatusCode::invalid_argument);
+    EXPECT_EQ(view->prepare_move(2, a).status().code(), StatusCode::not_found);
+    auto added = view->add_object({"added", box_mesh({0, 0, 0}, {1, 1, 1})});
+    ASSERT_TRUE(added.ok());
+    EXPECT_EQ(view->prepare_move(*added, a).status().code(), StatusCode::failed_precondition);
+    fs::remove_all(dir);
+}

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <shared_mutex>
 #include <string>
@@ -59,6 +60,19 @@ class ModelView {
     StatusOr<std::uint32_t> add_object(ModelObject object);
     Status delete_object(std::uint32_t object);
 
+    // move_object in two steps, for a caller that serialises its edits under its own lock: the
+    // slow step (a stored object read from disk, transformed and checked) takes no lock and can
+    // run outside the caller's; commit_move charges the copy and publishes the new version (and
+    // fails NOT_FOUND when the object was deleted meanwhile). Edits commit one at a time.
+    struct PreparedMove {
+        std::uint32_t object = 0;
+        bool back = false;  // to the stored placement: no copy
+        std::string name;
+        TriangleMesh mesh;  // the moved coordinates (empty when `back`)
+    };
+    StatusOr<PreparedMove> prepare_move(std::uint32_t object, const Affine& transform) const;
+    Status commit_move(PreparedMove move);
+
     std::uint32_t object_count() const;
     StatusOr<std::string> object_name(std::uint32_t object) const;
     bool deleted(std::uint32_t object) const;
@@ -88,9 +102,10 @@ class ModelView {
     std::shared_ptr<GeometryCache> m_cache;
     PieceIndex m_index;
     double m_slack = 0.0;
-    mutable std::shared_mutex m_mutex;
+    std::mutex m_commit_mutex;  // edits publish one at a time (charge, then swap the snapshot)
+    mutable std::shared_mutex m_mutex;  // guards m_snapshot (held only to read or swap it)
     std::shared_ptr<const Snapshot> m_snapshot;
-    std::uint32_t m_next_added = 0;  // added ids are never reused, even after a delete
+    std::uint32_t m_next_added = 0;  // guarded by m_commit_mutex: added ids are never reused
 };
 
 struct AvatarQueryOptions {
