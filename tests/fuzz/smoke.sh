@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Short fuzz run for CI: builds the libFuzzer targets with clang in build/fuzz, runs each on its
-# committed corpus (and kept crashers) for SECONDS_PER_TARGET seconds (default 10), one process,
-# and fails on any crash, leak, timeout (FUZZ_TIMEOUT, default 3 s per input) or out-of-memory.
+# committed corpus (and kept crashers) for SECONDS_PER_TARGET seconds (default 10), one process
+# each, as many at once as there are CPUs, and fails on any crash, leak, timeout (FUZZ_TIMEOUT,
+# default 3 s per input) or out-of-memory.
 # New inputs go to a scratch directory, never into the repository. Prints the executions done per
 # target and the time taken.
 #
@@ -19,20 +20,43 @@ built=$(date +%s)
 
 scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT
-failed=0
-summary=()
-for name in "${FUZZ_TARGETS[@]}"; do
-    mkdir -p "$scratch/$name" "$FUZZ_BUILD/artifacts"
-    inputs=("$scratch/$name" "$FUZZ_DIR/corpus/$name")
+mkdir -p "$FUZZ_BUILD/artifacts"
+
+# One target's run; its exit status goes to $scratch/NAME.rc.
+run_target() {
+    local name="$1"
+    mkdir -p "$scratch/$name"
+    local inputs=("$scratch/$name" "$FUZZ_DIR/corpus/$name")
     if [[ -d "$FUZZ_DIR/regressions/$name" ]]; then
         inputs+=("$FUZZ_DIR/regressions/$name")
     fi
-    log="$FUZZ_BUILD/smoke-$name.log"
-    rc=0
+    local rc=0
     # shellcheck disable=SC2046
     "$FUZZ_BUILD/tests/fuzz/proxima_fuzz_$name" $(fuzz_options "$name") -seed=1 \
         -max_total_time="$seconds" -artifact_prefix="$FUZZ_BUILD/artifacts/$name-" \
-        "${inputs[@]}" >"$log" 2>&1 || rc=$?
+        "${inputs[@]}" >"$FUZZ_BUILD/smoke-$name.log" 2>&1 || rc=$?
+    echo "$rc" >"$scratch/$name.rc"
+}
+
+# As many targets at once as there are CPUs (each libFuzzer run is one process on one core, so
+# each still gets its $seconds of a whole core), then the results in FUZZ_TARGETS order.
+parallel=$(nproc)
+running=0
+for name in "${FUZZ_TARGETS[@]}"; do
+    run_target "$name" &
+    running=$((running + 1))
+    if [[ $running -ge $parallel ]]; then
+        wait -n || true
+        running=$((running - 1))
+    fi
+done
+wait
+
+failed=0
+summary=()
+for name in "${FUZZ_TARGETS[@]}"; do
+    log="$FUZZ_BUILD/smoke-$name.log"
+    rc=$(cat "$scratch/$name.rc" 2>/dev/null || echo 1)
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
     rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
     if [[ $rc -ne 0 ]]; then
