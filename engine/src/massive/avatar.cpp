@@ -518,6 +518,9 @@ struct AvatarTracker::Query {
     // 2. The nearest object: the overlay objects, then candidates in growing radii around the
     // avatar's box.
     Status nearest_object() {
+        if (!result.collisions.empty()) {
+            return nearest_among_collisions();
+        }
         double radius = start_radius();
         std::unordered_set<std::uint32_t> tested;
         seed_bound(radius);
@@ -550,6 +553,58 @@ struct AvatarTracker::Query {
             result.nearest = nearest;
             tracker.m_previous_nearest = nearest.distance;
         }
+        tracker.m_seed = next_seed;
+        return {};
+    }
+
+    // 2'. The avatar touches something: the nearest object is at distance 0, and among the
+    // objects at distance 0 (result.collisions holds every one of them: within_tolerance tested
+    // every object within the tolerance) the smallest index comes first in the nearest order
+    // (distance, object, avatar triangle, object triangle). So only that object's pieces are
+    // searched, at bound 0, for its first touching pair in that order: the same answer as the
+    // search over every candidate, without re-traversing the other touching objects.
+    Status nearest_among_collisions() {
+        const std::uint32_t first = result.collisions.front().object;  // sorted by object
+        max_sq = 0.0;
+        seed_sq = 0.0;
+        for (const auto& o : snap->overlay) {
+            if (o.object != first) {
+                continue;
+            }
+            std::uint32_t object = 0;
+            auto hit = test(0, o.piece.get(), 0.0, true, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            current_piece = UINT32_MAX;
+            consider(object, *hit);
+        }
+        std::vector<std::uint32_t> near;
+        tracker.m_view->index().within(box, 0.0, slack, near);
+        std::sort(near.begin(), near.end());
+        for (auto p : near) {
+            if (pieces[p].object != first || snap->masked[first] != 0) {
+                continue;
+            }
+            if (stopped()) {
+                return stop_status(*cancel, "avatar query");
+            }
+            std::uint32_t object = 0;
+            auto hit = test(p, nullptr, 0.0, true, object);
+            if (!hit.ok()) {
+                return hit.status();
+            }
+            current_piece = p;
+            consider(object, *hit);
+        }
+        if (!have || best_sq != 0.0) {
+            return Status(StatusCode::internal,
+                          "avatar query: object " + std::to_string(first) +
+                              " touches the avatar, yet no touching pair was found again");
+        }
+        nearest.distance = 0.0;
+        result.nearest = nearest;
+        tracker.m_previous_nearest = 0.0;
         tracker.m_seed = next_seed;
         return {};
     }

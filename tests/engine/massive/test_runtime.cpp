@@ -10,10 +10,12 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <random>
 #include <thread>
 
 #include "proxima/distance/bounds.hpp"
+#include "proxima/distance/primitives.hpp"
 #include "proxima/massive/avatar.hpp"
 #include "proxima/massive/generator.hpp"
 #include "proxima/massive/verify.hpp"
@@ -621,6 +623,32 @@ void check_against_engine(const ModelView& view, const std::vector<TriangleMesh>
     if (got.nearest) {
         EXPECT_EQ(got.nearest->distance, sep.distance);
         EXPECT_EQ(got.nearest->object, ref.model_object[sep.other]);
+        // Touching (the avatar query's shortcut: only the smallest touching object is searched
+        // again): the first touching pair in AvatarResult's tie order, the smaller avatar
+        // triangle then the smaller object triangle, by brute force over every pair whose boxes
+        // overlap (a touching pair's always do; the boxes are exact in floating point).
+        if (got.nearest->distance == 0.0) {
+            const TriangleMesh& object = objects[got.nearest->object];
+            auto corners = [](const TriangleMesh& m, std::uint32_t t) {
+                const auto& i = m.triangles[t];
+                return Triangle{m.vertices[i[0]], m.vertices[i[1]], m.vertices[i[2]]};
+            };
+            std::optional<std::pair<std::uint32_t, std::uint32_t>> first;
+            for (std::uint32_t ta = 0; ta < avatar_posed.triangles.size() && !first; ++ta) {
+                const Triangle x = corners(avatar_posed, ta);
+                const Aabb bx = triangle_box(x[0], x[1], x[2]);
+                for (std::uint32_t to = 0; to < object.triangles.size() && !first; ++to) {
+                    const Triangle y = corners(object, to);
+                    if (box_squared_distance(bx, triangle_box(y[0], y[1], y[2])) == 0.0 &&
+                        triangle_triangle(y, x).squared_distance == 0.0) {
+                        first = {ta, to};
+                    }
+                }
+            }
+            ASSERT_TRUE(first.has_value()) << "the nearest object does not touch the avatar";
+            EXPECT_EQ(got.nearest->avatar_triangle, first->first);
+            EXPECT_EQ(got.nearest->object_triangle, first->second);
+        }
     }
 }
 
