@@ -67,14 +67,23 @@ std::uint32_t ModelView::object_count() const {
     return n;
 }
 
-bool ModelView::deleted(std::uint32_t object) const {
-    auto s = snapshot();
-    const bool in_overlay = std::any_of(s->overlay.begin(), s->overlay.end(),
+namespace {
+
+// Whether `object` is absent from snapshot `s`: a store object masked with no overlay copy, or an
+// id that no overlay object has.
+bool deleted_in(const ModelView::Snapshot& s, std::uint32_t object) {
+    const bool in_overlay = std::any_of(s.overlay.begin(), s.overlay.end(),
                                         [&](const auto& o) { return o.object == object; });
-    if (object < s->masked.size()) {
-        return s->masked[object] != 0 && !in_overlay;
+    if (object < s.masked.size()) {
+        return s.masked[object] != 0 && !in_overlay;
     }
     return !in_overlay;
+}
+
+}  // namespace
+
+bool ModelView::deleted(std::uint32_t object) const {
+    return deleted_in(*snapshot(), object);
 }
 
 StatusOr<std::string> ModelView::object_name(std::uint32_t object) const {
@@ -193,7 +202,7 @@ Status ModelView::commit_move(PreparedMove move) {
     std::lock_guard commit(m_commit_mutex);
     const auto current = snapshot();
     const std::uint32_t object = move.object;
-    if (deleted(object)) {  // by an edit committed since the move was prepared
+    if (deleted_in(*current, object)) {  // by an edit committed since the move was prepared
         return not_found("move: no object " + std::to_string(object) + " in the model");
     }
     auto next = std::make_shared<Snapshot>(*current);
@@ -243,10 +252,11 @@ StatusOr<std::uint32_t> ModelView::add_object(ModelObject object) {
 
 Status ModelView::delete_object(std::uint32_t object) {
     std::lock_guard commit(m_commit_mutex);
-    if (deleted(object)) {
+    const auto current = snapshot();
+    if (deleted_in(*current, object)) {
         return not_found("delete: no object " + std::to_string(object) + " in the model");
     }
-    auto next = std::make_shared<Snapshot>(*snapshot());
+    auto next = std::make_shared<Snapshot>(*current);
     std::erase_if(next->overlay, [&](const auto& x) { return x.object == object; });
     if (object < next->masked.size()) {
         next->masked[object] = 1;
@@ -549,12 +559,17 @@ struct AvatarTracker::Query {
                 std::min(max_d, std::max(radius * 4.0, 1e-9 + (have ? std::sqrt(best_sq) : 0.0)));
         }
         if (have) {
-            nearest.distance = std::sqrt(best_sq);
-            result.nearest = nearest;
-            tracker.m_previous_nearest = nearest.distance;
+            finish_nearest();
         }
         tracker.m_seed = next_seed;
         return {};
+    }
+
+    // The best pair found becomes the answer's nearest, and the next pose's starting radius.
+    void finish_nearest() {
+        nearest.distance = std::sqrt(best_sq);
+        result.nearest = nearest;
+        tracker.m_previous_nearest = nearest.distance;
     }
 
     // 2'. The avatar touches something: the nearest object is at distance 0, and among the
@@ -565,8 +580,6 @@ struct AvatarTracker::Query {
     // search over every candidate, without re-traversing the other touching objects.
     Status nearest_among_collisions() {
         const std::uint32_t first = result.collisions.front().object;  // sorted by object
-        max_sq = 0.0;
-        seed_sq = 0.0;
         for (const auto& o : snap->overlay) {
             if (o.object != first) {
                 continue;
@@ -579,11 +592,15 @@ struct AvatarTracker::Query {
             current_piece = UINT32_MAX;
             consider(object, *hit);
         }
+        // `consider` keeps the first pair in the nearest order whatever order the pieces come
+        // in. A masked (moved or deleted) store object has only its overlay copy, tested above,
+        // and an added object has no store piece at all.
         std::vector<std::uint32_t> near;
-        tracker.m_view->index().within(box, 0.0, slack, near);
-        std::sort(near.begin(), near.end());
+        if (first < snap->masked.size() && snap->masked[first] == 0) {
+            tracker.m_view->index().within(box, 0.0, slack, near);
+        }
         for (auto p : near) {
-            if (pieces[p].object != first || snap->masked[first] != 0) {
+            if (pieces[p].object != first) {
                 continue;
             }
             if (stopped()) {
@@ -602,9 +619,7 @@ struct AvatarTracker::Query {
                           "avatar query: object " + std::to_string(first) +
                               " touches the avatar, yet no touching pair was found again");
         }
-        nearest.distance = 0.0;
-        result.nearest = nearest;
-        tracker.m_previous_nearest = 0.0;
+        finish_nearest();
         tracker.m_seed = next_seed;
         return {};
     }
