@@ -1,13 +1,15 @@
-// Full-frame CCD (seed 000 §3.2, §5.3): swept boxes, one hierarchy per object over its triangles'
-// swept boxes, object pairs culled by their swept boxes (sort and sweep, as Stage I), dual
-// traversal between objects and self traversal within an object, then the elementary vf / ee
-// tests on the distinct primitive pairs whose swept boxes still meet.
+// Full-frame CCD (seed 000 §3.2, §5.3): boxes, one hierarchy per object over its triangles'
+// boxes, object pairs culled by their boxes (sort and sweep, as Stage I), dual traversal between
+// objects and self traversal within an object, then the elementary vf / ee tests on the distinct
+// primitive pairs whose boxes still meet.
 //
-// Why the culling never drops a pair the elementary test would report (so the result equals
-// testing every primitive pair with the same tests), rounding included. A pair that truly touches
-// (within d) has its two swept boxes within d of each other, so this covers every contact; the
-// point of the argument is that it also covers the elementary tests' conservative false positives.
-//
+// Why the culling never drops a pair the elementary test would report, rounding included. With
+// the prefilter off (CcdRequest::prefilter = false, for checks) the result equals testing every
+// primitive pair with the elementary tests (points 1-3); with it on (the default) it equals that
+// less pairs that the elementary test could only report `capped` and that provably never come
+// within min_distance + tolerance (points 2' and 4). A pair that truly touches (within d) has its
+// two swept boxes within d of each other, so either way this covers every contact; the point of
+// the argument is that it also covers the elementary tests' conservative false positives.
 // 1. What an elementary hit implies. elementary.cpp reports a hit only once its root region
 //    [0,1]^3 of (t, u, v) has passed its inclusion test: on every axis k, [min_k - e_k, max_k +
 //    e_k] meets [-d, d], where min_k / max_k are over the computed values of F at the region's 8
@@ -28,7 +30,9 @@
 //    inclusion test gives  X.lo - Y.hi <= d + 2e  and  Y.lo - X.hi <= d + 2e: the two boxes meet
 //    once one of them is grown by d + 2e on every side. (Coordinates beyond 2^1000 are scaled by
 //    2^-64 in elementary.cpp together with d: the same statement in scaled units.)
-// 2. Our boxes. Box corners are exact copies of input coordinates (min / max round nothing),
+// 2. Our boxes with the prefilter off: each box is a swept box (FrameBox holds it twice, for both
+//    frames, so that "apart at both frames" below is "apart"). Box corners are exact copies of
+//    input coordinates (min / max round nothing),
 //    except the fourth parallelogram corner b + c - a, computed with an error below 2 ulp(3 s),
 //    where s is the largest coordinate magnitude in the scene (both frames). Two boxes are
 //    declared apart only when fl(X.lo - g) > Y.hi on some axis (or the mirror), with
@@ -38,6 +42,23 @@
 //    than d + 2e apart on some axis: the elementary test would reject it at its root region. Every
 //    containment used by the hierarchy (triangle box >= vertex and edge boxes, node box
 //    >= children) is exact, so a pair of primitives whose boxes meet is always reached.
+// 2'. Our boxes with the prefilter on (and every coordinate at most 2^200 in magnitude): per frame,
+//    the box of the vertex, the edge's two vertices or the triangle's three corners at t = 0 and
+//    the box of the same points at t = 1 (no parallelogram corner: no computed coordinate). Two are
+//    declared apart only when on some axis one lies beyond the other at both frames, on the same
+//    side: fl(X.lo - g) > Y.hi at t = 0 and at t = 1 (or the mirror), with
+//        g = (d + tol + 2^-44 s)(1 + 2^-40) + 2^-50 s + 2^-1000   (tol the elementary tolerance).
+//    fl(X.lo - g) > Y.hi implies X.lo - Y.hi > g - 2^-53 (s + g) >= d + tol + 2^-44 s, the factor
+//    and 2^-50 s covering that rounding and g's own. Then every difference x_k - y_k of a point of
+//    the first primitive and one of the second exceeds d + tol + 2^-44 s at t = 0 and at t = 1,
+//    hence at every t (it is linear in t), and so does F_k, a convex combination of such
+//    differences at each t: this is the prefilter's axis filter (elementary.cpp) with s >= the
+//    pair's M, so the elementary test can report the pair only capped and point 4 applies. (The
+//    2^-1000 covers the solver's absolute underflow term, 2^-1059.) Moving together, two
+//    primitives in resting contact have far-apart swept boxes only when the motion is small;
+//    per-frame boxes are apart whenever the primitives are, at both frames, by more than g: on the
+//    real frame pairs 1.8-7.4x fewer triangle pairs than the parallelogram's swept boxes.
+//    Containment is exact as in point 2, so a pair whose boxes are not apart is always reached.
 // 3. Deduplication loses nothing: a vertex is tested from the smallest triangle that has it as a
 //    corner (its owner), an edge from the smallest triangle that has it as a side. The vf pair
 //    (v, f) is tested when the triangle pair (owner(v), f) is a candidate, which it is whenever
@@ -48,7 +69,8 @@
 //    that survives the boxes, before the elementary test: it rejects a pair only when the
 //    elementary test would report no hit or a capped one on a pair that provably never comes
 //    within min_distance + tolerance (CcdRequest::prefilter = false turns it off, for checks).
-//    So the result is what testing every primitive pair reports, less such capped pairs.
+//    So the result is what testing every primitive pair reports, less such capped pairs (those
+//    the boxes of point 2' drop included).
 
 #include "proxima/ccd/frame_ccd.hpp"
 
@@ -78,10 +100,31 @@ double seconds_since(Clock::time_point t0) {
 
 constexpr std::uint32_t NONE = ~0u;
 
-// Whether boxes a and b may come within g of each other (see the argument at the top).
-inline bool near(const Aabb& a, const Aabb& b, double g) {
-    return a.lo.x - g <= b.hi.x && b.lo.x - g <= a.hi.x && a.lo.y - g <= b.hi.y &&
-           b.lo.y - g <= a.hi.y && a.lo.z - g <= b.hi.z && b.lo.z - g <= a.hi.z;
+// The boxes of a set of moving points at the two frames: at[0] holds them at t = 0, at[1] at
+// t = 1 (with the prefilter off, both are the swept box; see point 2 at the top).
+struct FrameBox {
+    Aabb at[2];
+    void extend(const FrameBox& b) {
+        at[0].extend(b.at[0]);
+        at[1].extend(b.at[1]);
+    }
+    Aabb swept() const {
+        Aabb b = at[0];
+        b.extend(at[1]);
+        return b;
+    }
+};
+
+// Whether a and b may come within g of each other: false when on some axis one lies beyond the
+// other by more than g at both frames, on the same side (see the argument at the top).
+inline bool near(const FrameBox& a, const FrameBox& b, double g) {
+    for (int k = 0; k < 3; ++k) {
+        if ((a.at[0].lo[k] - g > b.at[0].hi[k] && a.at[1].lo[k] - g > b.at[1].hi[k]) ||
+            (b.at[0].lo[k] - g > a.at[0].hi[k] && b.at[1].lo[k] - g > a.at[1].hi[k])) {
+            return false;
+        }
+    }
+    return true;
 }
 
 // A hierarchy over boxes (one per triangle), nodes in depth-first pre-order: the left child of an
@@ -89,7 +132,7 @@ inline bool near(const Aabb& a, const Aabb& b, double g) {
 class SweptBvh {
   public:
     struct Node {
-        Aabb box;
+        FrameBox box;
         std::uint32_t begin = 0;
         std::uint32_t end = 0;
         std::uint32_t right = 0;  // 0 for leaves (node 0 is the root, never a right child)
@@ -98,7 +141,7 @@ class SweptBvh {
     };
     static constexpr std::uint32_t LEAF_SIZE = 4;
 
-    void build(const std::vector<Aabb>& boxes) {
+    void build(const std::vector<FrameBox>& boxes) {
         const auto n = static_cast<std::uint32_t>(boxes.size());
         m_order.resize(n);
         std::iota(m_order.begin(), m_order.end(), 0u);
@@ -106,7 +149,7 @@ class SweptBvh {
         m_nodes.reserve(2 * ((n + LEAF_SIZE - 1) / LEAF_SIZE) + 1);
         m_centers.resize(n);
         for (std::uint32_t t = 0; t < n; ++t) {
-            m_centers[t] = boxes[t].center();
+            m_centers[t] = boxes[t].swept().center();
         }
         if (n > 0) {
             build(boxes, 0, n);
@@ -118,10 +161,11 @@ class SweptBvh {
 
   private:
     // Median split on the longest axis of the centre bounds; depth is log2(n / LEAF_SIZE).
-    std::uint32_t build(const std::vector<Aabb>& boxes, std::uint32_t begin, std::uint32_t end) {
+    std::uint32_t build(const std::vector<FrameBox>& boxes, std::uint32_t begin,
+                        std::uint32_t end) {
         const auto index = static_cast<std::uint32_t>(m_nodes.size());
         m_nodes.emplace_back();
-        Aabb box;
+        FrameBox box;
         Aabb cbox;
         for (auto i = begin; i < end; ++i) {
             box.extend(boxes[m_order[i]]);
@@ -160,10 +204,10 @@ struct ObjectData {
     std::vector<std::array<std::uint32_t, 3>> tri_edges;  // side k = (corner k, corner k+1)
     // Bits 0-2: the triangle owns corner k; bits 3-5: it owns side k.
     std::vector<std::uint8_t> owns;
-    std::vector<Aabb> vertex_box;  // swept box of each vertex
-    std::vector<Aabb> edge_box;    // swept box of each edge
-    std::vector<Aabb> face_box;    // swept box of each triangle's parallelogram
-    Aabb box;                      // of all face boxes
+    std::vector<FrameBox> vertex_box;  // boxes of each vertex
+    std::vector<FrameBox> edge_box;    // of each edge
+    std::vector<FrameBox> face_box;  // of each triangle (its parallelogram's swept box when loose)
+    FrameBox box;                    // of all face boxes
     SweptBvh bvh;
 };
 
@@ -177,7 +221,7 @@ std::uint32_t edge_index(const std::vector<std::array<std::uint32_t, 2>>& edges,
     return static_cast<std::uint32_t>(it - edges.begin());
 }
 
-void prepare(ObjectData& d) {
+void prepare(ObjectData& d, bool tight) {
     const auto& obj = *d.object;
     const auto& topo = *obj.topology;
     const auto& p0 = obj.vertices;
@@ -205,23 +249,31 @@ void prepare(ObjectData& d) {
     }
     d.vertex_box.resize(p0.size());
     for (std::size_t v = 0; v < p0.size(); ++v) {
-        d.vertex_box[v] = {cwise_min(p0[v], p1[v]), cwise_max(p0[v], p1[v])};
+        if (tight) {
+            d.vertex_box[v] = {Aabb{p0[v], p0[v]}, Aabb{p1[v], p1[v]}};
+        } else {
+            const Aabb b{cwise_min(p0[v], p1[v]), cwise_max(p0[v], p1[v])};
+            d.vertex_box[v] = {b, b};
+        }
     }
     d.edge_box.resize(d.edges.size());
     for (std::size_t e = 0; e < d.edges.size(); ++e) {
-        Aabb b = d.vertex_box[d.edges[e][0]];
+        FrameBox b = d.vertex_box[d.edges[e][0]];
         b.extend(d.vertex_box[d.edges[e][1]]);
         d.edge_box[e] = b;
     }
     d.face_box.resize(nt);
-    d.box = Aabb{};
+    d.box = FrameBox{};
     for (std::uint32_t t = 0; t < nt; ++t) {
         const auto& tri = topo.triangle(t);
-        Aabb b = d.vertex_box[tri[0]];
+        FrameBox b = d.vertex_box[tri[0]];
         b.extend(d.vertex_box[tri[1]]);
         b.extend(d.vertex_box[tri[2]]);
-        b.extend(p0[tri[1]] + p0[tri[2]] - p0[tri[0]]);
-        b.extend(p1[tri[1]] + p1[tri[2]] - p1[tri[0]]);
+        if (!tight) {
+            b.at[0].extend(p0[tri[1]] + p0[tri[2]] - p0[tri[0]]);
+            b.at[0].extend(p1[tri[1]] + p1[tri[2]] - p1[tri[0]]);
+            b.at[1] = b.at[0];
+        }
         d.face_box[t] = b;
         d.box.extend(b);
     }
@@ -245,11 +297,27 @@ struct Job {
     std::uint32_t nb;
 };
 
+CcdPoints points_of(const std::vector<ObjectData>& objects, const Candidate& c);
+
+// The primitive pairs of one job, each through the prefilter as it is found (while its triangles'
+// data is in cache, and without storing the ~97 % of pairs that the prefilter rejects): the pairs
+// the prefilter keeps go to `out`.
 struct Traversal {
     const std::vector<ObjectData>& objects;
     double gap;
+    const CcdRequest& request;
     std::vector<Candidate>& out;
     std::uint64_t triangle_pairs = 0;
+    std::uint64_t prefilter_rejects = 0;
+
+    void emit(const Candidate& c) {
+        if (request.prefilter &&
+            elementary_prefilter_rejects(c.kind, points_of(objects, c), request.elementary)) {
+            ++prefilter_rejects;
+            return;
+        }
+        out.push_back(c);
+    }
 
     // Between objects a != b: triangles ta of a and tb of b.
     void pair_between(std::uint32_t a, std::uint32_t ta, std::uint32_t b, std::uint32_t tb) {
@@ -265,10 +333,10 @@ struct Traversal {
         const auto own_b = B.owns[tb];
         for (int k = 0; k < 3; ++k) {
             if ((own_a & (1u << k)) != 0 && near(A.vertex_box[tri_a[k]], B.face_box[tb], gap)) {
-                out.push_back({a, tri_a[k], b, tb, CcdKind::vertex_face});
+                emit({a, tri_a[k], b, tb, CcdKind::vertex_face});
             }
             if ((own_b & (1u << k)) != 0 && near(B.vertex_box[tri_b[k]], A.face_box[ta], gap)) {
-                out.push_back({b, tri_b[k], a, ta, CcdKind::vertex_face});
+                emit({b, tri_b[k], a, ta, CcdKind::vertex_face});
             }
         }
         for (int i = 0; i < 3; ++i) {
@@ -282,7 +350,7 @@ struct Traversal {
                 }
                 const auto eb = B.tri_edges[tb][j];
                 if (near(A.edge_box[ea], B.edge_box[eb], gap)) {
-                    out.push_back({a, ea, b, eb, CcdKind::edge_edge});
+                    emit({a, ea, b, eb, CcdKind::edge_edge});
                 }
             }
         }
@@ -305,11 +373,11 @@ struct Traversal {
         for (int k = 0; k < 3; ++k) {
             if ((own_t & (1u << k)) != 0 && !corner_of(tri_t[k], tri_u) &&
                 near(O.vertex_box[tri_t[k]], O.face_box[u], gap)) {
-                out.push_back({o, tri_t[k], o, u, CcdKind::vertex_face});
+                emit({o, tri_t[k], o, u, CcdKind::vertex_face});
             }
             if ((own_u & (1u << k)) != 0 && !corner_of(tri_u[k], tri_t) &&
                 near(O.vertex_box[tri_u[k]], O.face_box[t], gap)) {
-                out.push_back({o, tri_u[k], o, t, CcdKind::vertex_face});
+                emit({o, tri_u[k], o, t, CcdKind::vertex_face});
             }
         }
         for (int i = 0; i < 3; ++i) {
@@ -328,7 +396,7 @@ struct Traversal {
                     continue;
                 }
                 if (near(O.edge_box[e1], O.edge_box[e2], gap)) {
-                    out.push_back({o, std::min(e1, e2), o, std::max(e1, e2), CcdKind::edge_edge});
+                    emit({o, std::min(e1, e2), o, std::max(e1, e2), CcdKind::edge_edge});
                 }
             }
         }
@@ -393,7 +461,7 @@ struct Traversal {
 
 // Splits the broad phase into jobs of at most about JOB_TRIANGLES triangles on each side, so that
 // the parallel loop balances; the split itself is serial and cheap (a few levels of each tree).
-constexpr std::uint32_t JOB_TRIANGLES = 1024;
+constexpr std::uint32_t JOB_TRIANGLES = 256;
 
 void split_job(const std::vector<ObjectData>& objects, double gap, const Job& job,
                std::vector<Job>& jobs) {
@@ -568,18 +636,23 @@ std::vector<std::pair<std::uint32_t, std::uint32_t>> near_object_pairs(
     const auto n = static_cast<std::uint32_t>(objects.size());
     std::vector<std::uint32_t> by_x(n);
     std::iota(by_x.begin(), by_x.end(), 0u);
+    std::vector<Aabb> swept(n);
+    for (std::uint32_t i = 0; i < n; ++i) {
+        swept[i] = objects[i].box.swept();
+    }
     std::sort(by_x.begin(), by_x.end(), [&](std::uint32_t a, std::uint32_t b) {
-        return std::tie(objects[a].box.lo.x, a) < std::tie(objects[b].box.lo.x, b);
+        return std::tie(swept[a].lo.x, a) < std::tie(swept[b].lo.x, b);
     });
     std::vector<std::pair<std::uint32_t, std::uint32_t>> object_pairs;
     for (std::uint32_t k = 0; k < n; ++k) {
-        const auto& bi = objects[by_x[k]].box;
+        const auto& bi = swept[by_x[k]];
         for (auto l = k + 1; l < n; ++l) {
-            const auto& bj = objects[by_x[l]].box;
+            const auto& bj = swept[by_x[l]];
             if (bj.lo.x - gap > bi.hi.x) {
-                break;  // sorted by lo.x: every later box starts further right
+                // Sorted by lo.x: every later box starts further right, beyond at both frames.
+                break;
             }
-            if (near(bi, bj, gap)) {
+            if (near(objects[by_x[k]].box, objects[by_x[l]].box, gap)) {
                 object_pairs.emplace_back(std::min(by_x[k], by_x[l]), std::max(by_x[k], by_x[l]));
             }
         }
@@ -613,114 +686,96 @@ std::vector<Job> broad_phase_jobs(const std::vector<ObjectData>& objects, double
     return jobs;
 }
 
-// Broad phase, part 3, and narrow phase, in batches of jobs so that the candidate lists stay
-// small (tens of MB, not one list of every candidate of the frame): each batch collects the
-// candidate primitive pairs of its jobs in parallel, then runs their elementary tests in
-// parallel. The hits go to per-thread lists, in no particular order.
-class BatchRunner {
+// Broad phase, part 3, and narrow phase, fused: one parallel loop over the jobs; each job
+// traverses its node pair, puts every primitive pair through the prefilter as it is found
+// (Traversal::emit), then runs the elementary tests on the pairs the prefilter kept. Only one
+// job's kept pairs are stored per thread (the rejected ~97 % are never stored), and no thread
+// waits for another before the end (earlier, batches of jobs collected their candidates and
+// tested them in two parallel loops, with a barrier after each). The hits go to per-thread
+// lists, in no particular order.
+class FusedRunner {
   public:
-    BatchRunner(const std::vector<ObjectData>& objects, double gap, const std::vector<Job>& jobs,
+    FusedRunner(const std::vector<ObjectData>& objects, double gap, const std::vector<Job>& jobs,
                 const CcdRequest& request, Stopper& stopper)
-        : m_objects(objects),
-          m_gap(gap),
-          m_jobs(jobs),
-          m_request(request),
-          m_stopper(stopper),
-          m_batch(std::max<std::size_t>(
-              32, 8 * static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()))),
-          m_candidates(m_batch),
-          m_offsets(m_batch + 1, 0) {}
+        : m_objects(objects), m_gap(gap), m_jobs(jobs), m_request(request), m_stopper(stopper) {}
 
-    // False when stopped (the caller's stopper then says why).
+    // False when stopped (the caller's stopper then says why). The loop's wall time goes to the
+    // broad and the narrow phase in proportion to the CPU time each part took in it.
     bool run(CcdStats& stats) {
-        for (std::size_t first_job = 0; first_job < m_jobs.size(); first_job += m_batch) {
-            const auto t0 = Clock::now();
-            const auto count = std::min(m_batch, m_jobs.size() - first_job);
-            collect(first_job, count);
-            if (m_stopper.should_stop()) {
-                return false;
-            }
-            for (std::size_t j = 0; j < count; ++j) {
-                m_offsets[j + 1] = m_offsets[j] + m_candidates[j].size();
-            }
-            const auto t1 = Clock::now();
-            const auto rejected = test(count);
-            stats.elementary_tests += m_offsets[count] - rejected;
-            stats.prefilter_rejects += rejected;
-            if (m_stopper.should_stop()) {
-                return false;
-            }
-            const auto t2 = Clock::now();
-            stats.broad_phase_seconds += std::chrono::duration<double>(t1 - t0).count();
-            stats.narrow_phase_seconds += std::chrono::duration<double>(t2 - t1).count();
+        const auto start = Clock::now();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m_jobs.size(), 1),
+                          [&](const tbb::blocked_range<std::size_t>& range) {
+                              auto& local = m_local.local();
+                              for (auto j = range.begin(); j < range.end(); ++j) {
+                                  if (m_stopper.should_stop()) {
+                                      return;
+                                  }
+                                  run_job(m_jobs[j], local);
+                              }
+                          });
+        if (m_stopper.should_stop()) {
+            return false;
         }
-        m_candidates = {};
-        stats.candidate_pairs = m_triangle_pairs.load();
+        const double wall = seconds_since(start);
+        double traversal = 0.0;
+        double tests = 0.0;
+        for (const auto& local : m_local) {
+            stats.candidate_pairs += local.triangle_pairs;
+            stats.prefilter_rejects += local.prefilter_rejects;
+            stats.elementary_tests += local.tests;
+            traversal += local.traversal_seconds;
+            tests += local.test_seconds;
+        }
+        const double share = traversal + tests > 0.0 ? traversal / (traversal + tests) : 1.0;
+        stats.broad_phase_seconds += wall * share;
+        stats.narrow_phase_seconds += wall * (1.0 - share);
         return true;
     }
 
-    tbb::enumerable_thread_specific<std::vector<CcdPair>>& hits() { return m_hits; }
-
-  private:
-    // The candidate primitive pairs of jobs [first_job, first_job + count), one list per job.
-    void collect(std::size_t first_job, std::size_t count) {
-        tbb::parallel_for(std::size_t{0}, count, [&](std::size_t j) {
-            m_candidates[j].clear();
-            if (m_stopper.should_stop()) {
-                return;
-            }
-            Traversal trav{m_objects, m_gap, m_candidates[j]};
-            trav.run(m_jobs[first_job + j]);
-            m_triangle_pairs.fetch_add(trav.triangle_pairs, std::memory_order_relaxed);
-        });
+    // Every thread's hits, appended to `out`.
+    void take_hits(std::vector<CcdPair>& out) {
+        for (auto& local : m_local) {
+            out.insert(out.end(), local.hits.begin(), local.hits.end());
+            local.hits = {};
+        }
     }
 
-    // The elementary tests of the candidates of the batch's first `count` jobs, each after the
-    // prefilter (point 4 at the top). Returns how many candidates the prefilter rejected.
-    std::uint64_t test(std::size_t count) {
-        std::atomic<std::uint64_t> rejected{0};
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, m_offsets[count], 64), [&](const auto& range) {
-                if (m_stopper.should_stop()) {
-                    return;
-                }
-                auto& local = m_hits.local();
-                std::uint64_t filtered = 0;
-                struct Flush {  // adds this range's count on every way out
-                    std::atomic<std::uint64_t>& total;
-                    std::uint64_t& count;
-                    ~Flush() { total.fetch_add(count, std::memory_order_relaxed); }
-                } flush{rejected, filtered};
-                auto job = static_cast<std::size_t>(std::upper_bound(m_offsets.begin(),
-                                                                     m_offsets.begin() + count + 1,
-                                                                     range.begin()) -
-                                                    m_offsets.begin() - 1);
-                for (auto i = range.begin(); i < range.end(); ++i) {
-                    // Before every test, not once per range: a degenerate test (coplanar faces
-                    // sweeping through each other) uses its whole work bound, ~2.5 ms in release,
-                    // and 64 of them overran a frame's deadline by 0.16 s (by seconds under ASan;
-                    // fuzz_frames). The check costs ~20 ns against a test's >= 100 ns.
-                    if (m_stopper.should_stop()) {
-                        return;
-                    }
-                    while (i >= m_offsets[job + 1]) {
-                        ++job;
-                    }
-                    const auto& c = m_candidates[job][i - m_offsets[job]];
-                    const auto points = points_of(m_objects, c);
-                    if (m_request.prefilter &&
-                        elementary_prefilter_rejects(c.kind, points, m_request.elementary)) {
-                        ++filtered;
-                        continue;
-                    }
-                    const auto r = elementary(c.kind, points, m_request.elementary);
-                    if (r.hit) {
-                        local.push_back({c.kind, c.object, c.primitive, c.other, c.other_primitive,
-                                         r.toi, r.capped});
-                    }
-                }
-            });
-        return rejected.load();
+  private:
+    struct Local {
+        std::vector<Candidate> kept;  // one job's pairs that passed the prefilter
+        std::vector<CcdPair> hits;
+        std::uint64_t triangle_pairs = 0;
+        std::uint64_t prefilter_rejects = 0;
+        std::uint64_t tests = 0;
+        double traversal_seconds = 0.0;
+        double test_seconds = 0.0;
+    };
+
+    void run_job(const Job& job, Local& local) {
+        local.kept.clear();
+        const auto t0 = Clock::now();
+        Traversal trav{m_objects, m_gap, m_request, local.kept};
+        trav.run(job);
+        const auto t1 = Clock::now();
+        local.triangle_pairs += trav.triangle_pairs;
+        local.prefilter_rejects += trav.prefilter_rejects;
+        for (const auto& c : local.kept) {
+            // Before every test: a degenerate test (coplanar faces sweeping through each other)
+            // uses its whole work bound, ~2.5 ms in release, and 64 of them overran a frame's
+            // deadline by 0.16 s (by seconds under ASan; fuzz_frames). The check costs ~20 ns
+            // against a test's >= 100 ns.
+            if (m_stopper.should_stop()) {
+                break;
+            }
+            ++local.tests;
+            const auto r = elementary(c.kind, points_of(m_objects, c), m_request.elementary);
+            if (r.hit) {
+                local.hits.push_back(
+                    {c.kind, c.object, c.primitive, c.other, c.other_primitive, r.toi, r.capped});
+            }
+        }
+        local.traversal_seconds += std::chrono::duration<double>(t1 - t0).count();
+        local.test_seconds += seconds_since(t1);
     }
 
     const std::vector<ObjectData>& m_objects;
@@ -728,18 +783,11 @@ class BatchRunner {
     const std::vector<Job>& m_jobs;
     const CcdRequest& m_request;
     Stopper& m_stopper;
-    std::size_t m_batch;
-    tbb::enumerable_thread_specific<std::vector<CcdPair>> m_hits;
-    std::vector<std::vector<Candidate>> m_candidates;
-    std::vector<std::size_t> m_offsets;
-    std::atomic<std::uint64_t> m_triangle_pairs{0};
+    tbb::enumerable_thread_specific<Local> m_local;
 };
 
 // Results: sorted pairs, per object pair and overall earliest.
-void merge_results(tbb::enumerable_thread_specific<std::vector<CcdPair>>& hits, CcdResult& result) {
-    for (auto& local : hits) {
-        result.pairs.insert(result.pairs.end(), local.begin(), local.end());
-    }
+void merge_results(CcdResult& result) {
     std::sort(result.pairs.begin(), result.pairs.end(), [](const CcdPair& x, const CcdPair& y) {
         return std::tie(x.kind, x.object, x.primitive, x.other, x.other_primitive) <
                std::tie(y.kind, y.object, y.primitive, y.other, y.other_primitive);
@@ -812,20 +860,26 @@ StatusOr<CcdResult> continuous_collisions(const Scene& scene,
     CcdResult result;
     std::vector<ObjectData> objects(scene.size());
     const double scale = prepare_objects(scene, positions_t1, objects);
-    const double gap = request.elementary.min_distance * (1.0 + 1e-9) + 1e-12 * scale;
+    const bool tight = request.prefilter && scale <= 0x1p200;
+    const double d = request.elementary.min_distance;
+    const double gap =
+        tight ? (d + request.elementary.tolerance + 0x1p-44 * scale) * (1.0 + 0x1p-40) +
+                    0x1p-50 * scale + 0x1p-1000
+              : d * (1.0 + 1e-9) + 1e-12 * scale;
     tbb::parallel_for(std::uint32_t{0}, static_cast<std::uint32_t>(scene.size()),
-                      [&](std::uint32_t i) { prepare(objects[i]); });
+                      [&](std::uint32_t i) { prepare(objects[i], tight); });
     const std::vector<Job> jobs = broad_phase_jobs(objects, gap, request, result.stats);
 
     result.stats.brute_force_tests = brute_force_count(objects, request);
     result.stats.broad_phase_seconds = seconds_since(start);
-    BatchRunner runner(objects, gap, jobs, request, stopper);
+    FusedRunner runner(objects, gap, jobs, request, stopper);
     if (!runner.run(result.stats)) {
         return stopper.status();
     }
 
     const auto merge_start = Clock::now();
-    merge_results(runner.hits(), result);
+    runner.take_hits(result.pairs);
+    merge_results(result);
     name_vertices(objects, result);
     result.stats.narrow_phase_seconds += seconds_since(merge_start);
     result.stats.total_seconds = seconds_since(start);

@@ -105,13 +105,61 @@ Subset everything(const SceneObject& obj) {
 constexpr CcdKind VF_KIND = CcdKind::vertex_face;
 constexpr CcdKind EE_KIND = CcdKind::edge_edge;
 
-// A capped hit (the work bound reached, no decision) on a pair that the prefilter proves never
-// comes within min_distance + tolerance: continuous_collisions does not report it (the prefilter
-// runs first), and a larger work bound would reject it (CcdPrefilterVsBrute checks both). An
-// uncapped hit is never dropped: the prefilter never rejects one.
-bool dropped_by_prefilter(CcdKind kind, const CcdPoints& pts, const ElementaryResult& r,
-                          const ElementaryOptions& options) {
-    return r.capped && elementary_prefilter_rejects(kind, pts, options);
+// The per-frame box test of continuous_collisions with the prefilter on (point 2 in
+// frame_ccd.cpp): the points of the first primitive (pts[0, n) at t = 0, pts[4, 4 + n) at t = 1)
+// lie beyond those of the second by more than `gap` on one axis, on the same side at both frames.
+// `gap` is the engine's: (d + tol + 2^-44 s)(1 + 2^-40) + 2^-50 s + 2^-1000, s the largest
+// |coordinate| of the scene at both frames.
+bool apart_at_both_frames(CcdKind kind, const CcdPoints& pts, double gap) {
+    const int n = kind == CcdKind::vertex_face ? 1 : 2;
+    for (int k = 0; k < 3; ++k) {
+        bool below[2];
+        bool above[2];
+        for (int end = 0; end < 2; ++end) {
+            const auto* q = pts.data() + std::ptrdiff_t{4} * end;
+            double lo1 = q[0][k];
+            double hi1 = q[0][k];
+            double lo2 = q[n][k];
+            double hi2 = q[n][k];
+            for (int j = 0; j < 4; ++j) {
+                auto& lo = j < n ? lo1 : lo2;
+                auto& hi = j < n ? hi1 : hi2;
+                lo = std::min(lo, q[j][k]);
+                hi = std::max(hi, q[j][k]);
+            }
+            above[end] = lo1 - gap > hi2;
+            below[end] = lo2 - gap > hi1;
+        }
+        if ((above[0] && above[1]) || (below[0] && below[1])) {
+            return true;
+        }
+    }
+    return false;
+}
+
+double culling_gap(const Scene& scene, const Frame& p1, const ElementaryOptions& options) {
+    double s = 0.0;
+    for (std::size_t i = 0; i < scene.size(); ++i) {
+        for (const auto* points : {&scene[i].vertices, &p1[i]}) {
+            for (const auto& p : *points) {
+                s = std::max({s, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+            }
+        }
+    }
+    return (options.min_distance + options.tolerance + 0x1p-44 * s) * (1.0 + 0x1p-40) +
+           0x1p-50 * s + 0x1p-1000;
+}
+
+// A capped hit (the work bound reached, no decision) on a pair that provably never comes within
+// min_distance + tolerance: continuous_collisions does not report it (the per-frame boxes or the
+// prefilter drop it before testing), and a larger work bound would reject it (CcdPrefilterVsBrute
+// checks the prefilter's half). An uncapped hit is never dropped: neither ever rejects one (checked
+// here on every brute-force hit).
+bool dropped_by_culling(CcdKind kind, const CcdPoints& pts, const ElementaryResult& r,
+                        const ElementaryOptions& options, double gap) {
+    const bool apart = apart_at_both_frames(kind, pts, gap);
+    EXPECT_TRUE(!apart || r.capped) << "an uncapped hit whose boxes are apart at both frames";
+    return r.capped && (apart || elementary_prefilter_rejects(kind, pts, options));
 }
 
 // Every vf and ee pair among the subsets, with the same conventions as continuous_collisions
@@ -119,7 +167,7 @@ bool dropped_by_prefilter(CcdKind kind, const CcdPoints& pts, const ElementaryRe
 // other_primitive within an object), tested with no culling at all. Sorted like the result.
 std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
                                  const std::vector<Subset>& subsets,
-                                 const ElementaryOptions& options) {
+                                 const ElementaryOptions& options, bool prefilter = true) {
     const auto n = static_cast<std::uint32_t>(scene.size());
     std::vector<std::vector<std::array<std::uint32_t, 2>>> edges(n);
     for (std::uint32_t i = 0; i < n; ++i) {
@@ -132,6 +180,7 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
             items.emplace_back(a, b);
         }
     }
+    const double gap = culling_gap(scene, p1, options);
     std::vector<std::vector<CcdPair>> found(items.size());
     tbb::parallel_for(std::size_t{0}, items.size(), [&](std::size_t k) {
         const auto [a, b] = items[k];
@@ -148,7 +197,7 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
                                     B.vertices[tri[2]], p1[a][v],           p1[b][tri[0]],
                                     p1[b][tri[1]],      p1[b][tri[2]]};
                 const auto r = vertex_face(pts, options);
-                if (r.hit && !dropped_by_prefilter(VF_KIND, pts, r, options)) {
+                if (r.hit && !(prefilter && dropped_by_culling(VF_KIND, pts, r, options, gap))) {
                     out.push_back({CcdKind::vertex_face, a, v, b, f, r.toi, r.capped});
                 }
             }
@@ -168,7 +217,7 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
                                     B.vertices[y[1]], p1[a][x[0]],      p1[a][x[1]],
                                     p1[b][y[0]],      p1[b][y[1]]};
                 const auto r = edge_edge(pts, options);
-                if (r.hit && !dropped_by_prefilter(EE_KIND, pts, r, options)) {
+                if (r.hit && !(prefilter && dropped_by_culling(EE_KIND, pts, r, options, gap))) {
                     out.push_back({CcdKind::edge_edge, a, e1, b, e2, r.toi, r.capped});
                 }
             }
@@ -184,12 +233,12 @@ std::vector<CcdPair> brute_force(const Scene& scene, const Frame& p1,
 }
 
 std::vector<CcdPair> brute_force_all(const Scene& scene, const Frame& p1,
-                                     const ElementaryOptions& options) {
+                                     const ElementaryOptions& options, bool prefilter = true) {
     std::vector<Subset> subsets;
     for (const auto& o : scene.objects()) {
         subsets.push_back(everything(o));
     }
-    return brute_force(scene, p1, subsets, options);
+    return brute_force(scene, p1, subsets, options, prefilter);
 }
 
 // The result must hold every brute-force hit with the same toi and capped flag.
@@ -587,6 +636,14 @@ TEST(FrameCcd, ProceduralScenesEqualBruteForce) {
                 static_cast<unsigned long long>(r.stats.brute_force_tests));
     EXPECT_GT(brute.size(), 1000u) << "the check needs contacts to mean something";
     expect_equal(r, brute, "bowl");
+    // Without the prefilter the boxes are the swept boxes of the triangles' parallelograms (point 1
+    // at the top of frame_ccd.cpp): every hit of every pair, capped ones included.
+    CcdRequest unfiltered = req;
+    unfiltered.prefilter = false;
+    const auto r_unfiltered = run_ccd(scene, p1, unfiltered);
+    EXPECT_GT(r_unfiltered.stats.candidate_pairs, r.stats.candidate_pairs);
+    expect_equal(r_unfiltered, brute_force_all(scene, p1, req.elementary, false),
+                 "bowl unfiltered");
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
     const auto serial = run_ccd(scene, p1, req);
     ASSERT_EQ(serial.pairs.size(), r.pairs.size());

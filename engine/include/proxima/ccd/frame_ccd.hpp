@@ -8,13 +8,14 @@
 //
 // Exact with respect to the elementary tests: the result holds exactly the pairs that testing every
 // primitive pair with `vertex_face` / `edge_edge` reports, with the same times of impact. The
-// broad phase (swept boxes, one hierarchy per object, object boxes swept and pruned) only decides
+// broad phase (boxes, one hierarchy per object, object boxes swept and pruned) only decides
 // which pairs are tested; the argument that it never drops a pair the elementary test would
 // report, rounding included, is at the top of engine/src/ccd/frame_ccd.cpp. The elementary tests
 // are conservative (never a false negative, never a late time of impact), so the result is too.
-// One exception to "exactly": a pair that the prefilter (elementary_prefilter_rejects) proves never
-// comes within min_distance + tolerance is not tested, so it is absent even where the elementary
-// test, reaching its work bound, would have reported it `capped` (a larger bound rejects it).
+// One exception to "exactly": a pair that the prefilter (elementary_prefilter_rejects), or with it
+// on the boxes at both frames, prove never comes within min_distance + tolerance is not tested,
+// so it is absent even where the elementary test, reaching its work bound, would have reported it
+// `capped` (a larger bound rejects it).
 // Vertices used by no triangle are not primitives and are never tested.
 
 #include <array>
@@ -78,21 +79,25 @@ struct ObjectPairToi {
 };
 
 struct CcdStats {
-    // Triangle pairs whose swept boxes overlap (from the hierarchies), within and between objects.
+    // Triangle pairs whose boxes are not apart (from the hierarchies; with the prefilter on, boxes
+    // at both frames, otherwise swept boxes: frame_ccd.cpp), within and between objects.
     std::uint64_t candidate_pairs = 0;
     // Distinct primitive pairs (vf and ee) tested with the elementary tests after the per-primitive
-    // swept-box filter and the prefilter (elementary_prefilter_rejects); brute force would test
+    // box filter and the prefilter (elementary_prefilter_rejects); brute force would test
     // `brute_force_tests`.
     std::uint64_t elementary_tests = 0;
-    // Pairs that passed the swept-box filter but were rejected by the prefilter (not tested).
+    // Pairs that passed the box filter but were rejected by the prefilter (not tested).
     // Not sent over the wire (proxima.proto has no field for it).
     std::uint64_t prefilter_rejects = 0;
     std::uint64_t brute_force_tests = 0;
     // Elementary tests that reached their work bound.
     std::uint64_t capped_tests = 0;
-    std::uint64_t object_pairs_tested = 0;  // object pairs whose swept boxes overlap
-    double broad_phase_seconds = 0.0;       // swept boxes, hierarchies, traversals
-    double narrow_phase_seconds = 0.0;      // elementary tests
+    std::uint64_t object_pairs_tested = 0;  // object pairs whose boxes are not apart
+    // Boxes, hierarchies, traversals and the prefilter; then the elementary tests. The traversals
+    // and the tests run in one parallel loop (each job tests the pairs it finds): its wall time is
+    // split between the two in proportion to the CPU time each took.
+    double broad_phase_seconds = 0.0;
+    double narrow_phase_seconds = 0.0;
     double total_seconds = 0.0;
 };
 
