@@ -6,7 +6,12 @@
 # over the rounds: old ms, new warm ms, new cold ms, old/new ratios and the issue's goals.
 #
 #   tests/bench/baseline.sh [--commit C] [--rounds N] [--reps N] [--frames N] [--scenes a,b,...]
-#                           [--data DIR]
+#                           [--data DIR] [--ccd]
+#
+# --ccd compares full-frame CCD instead (item 2 of the issue): proxima_ccd_frames_bench of both
+# trees on the five real frame pairs, --reps runs each (median), and prints per scene old and new
+# total seconds, their ratio, the issue's goal and whether the 4x and the goal are met, with the
+# contacts each found (d8a348f's tois sat on a coarse grid, so old and new pair sets may differ).
 #
 # Real frame pairs (--reps steps each) and the seed's procedural scenes bowl and breaking
 # (--frames frames, their per-frame self column) are compared; cloth-ball names both a real and a
@@ -22,7 +27,8 @@ rounds=3
 reps=5
 frames=4
 data=/work/shared/data
-scenes=n-body-simulation,cloth-ball,rod-twist,armadillo-rollers,cloth-funnel,bowl,breaking
+scenes=
+ccd=0
 while [[ $# -gt 0 ]]; do
     case "$1" in
         --commit) commit="$2"; shift 2 ;;
@@ -31,14 +37,22 @@ while [[ $# -gt 0 ]]; do
         --scenes) scenes="$2"; shift 2 ;;
         --frames) frames="$2"; shift 2 ;;
         --data) data="$2"; shift 2 ;;
-        -h|--help) sed -n 2,17p "$0"; exit 0 ;;
+        --ccd) ccd=1; shift ;;
+        -h|--help) sed -n 2,23p "$0"; exit 0 ;;
         *) echo "unknown argument: $1" >&2; exit 2 ;;
     esac
 done
 
+target=proxima_bench
+default_scenes=n-body-simulation,cloth-ball,rod-twist,armadillo-rollers,cloth-funnel,bowl,breaking
+if ((ccd)); then
+    target=proxima_ccd_frames_bench
+    default_scenes=armadillo-rollers,cloth-ball,cloth-funnel,n-body-simulation,rod-twist
+fi
+scenes=${scenes:-$default_scenes}
 root=$(git rev-parse --show-toplevel)
 cd "$root"
-new_bench=build/release/tests/bench/proxima_bench
+new_bench=build/release/tests/bench/$target
 [[ -x $new_bench ]] || { echo "build $new_bench first" >&2; exit 1; }
 full=$(git rev-parse --short "$commit")
 base=build/baseline-$full
@@ -47,10 +61,10 @@ if [[ ! -d $base/src ]]; then
     git worktree add --detach "$base/src" "$full" >&2
 fi
 (cd "$base/src" && cmake --preset release >/dev/null &&
-    cmake --build build/release -j2 --target proxima_bench >&2)
-old_bench=$base/src/build/release/tests/bench/proxima_bench
+    cmake --build build/release -j2 --target "$target" >&2)
+old_bench=$base/src/build/release/tests/bench/$target
 
-out=$base/runs
+out=$base/runs-$target
 rm -rf "$out"
 mkdir -p "$out"
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
@@ -62,11 +76,55 @@ for ((r = 1; r <= rounds; ++r)); do
         bench=$old_bench
         [[ $which == new ]] && bench=$new_bench
         echo "round $r: $which (load $(cut -d' ' -f1 /proc/loadavg))" >&2
-        "$bench" --scenes "$scenes" --reps "$reps" --frames "$frames" --data "$data" \
-            >"$out/$which-$r.txt" 2>/dev/null
+        args=(--scenes "$scenes" --reps "$reps" --data "$data")
+        ((ccd)) || args+=(--frames "$frames")
+        "$bench" "${args[@]}" >"$out/$which-$r.txt" 2>/dev/null
     done
 done
 echo "end: $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
+
+if ((ccd)); then
+    /usr/bin/python3 - "$out" "$rounds" "$full" <<'EOF'
+import pathlib, statistics, sys
+
+out, rounds, commit = pathlib.Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+GOALS = {"cloth-ball": 1.0, "n-body-simulation": 0.9, "rod-twist": 0.5, "armadillo-rollers": 0.45}
+
+def table(path):
+    """scene -> (total s, contacts, triangle pairs), from the bench's table (named columns)."""
+    rows, header = {}, None
+    for line in path.read_text().splitlines():
+        f = line.split()
+        if f and f[0] == "scene":
+            header = f
+            continue
+        if header and len(f) == len(header):
+            rows[f[0]] = (float(f[header.index("total-s")]), int(f[header.index("contacts")]),
+                          int(f[header.index("tri-pairs")]))
+    return rows
+
+old = [table(out / f"old-{r}.txt") for r in range(1, rounds + 1)]
+new = [table(out / f"new-{r}.txt") for r in range(1, rounds + 1)]
+print(f"\nfull-frame CCD, total seconds, median over {rounds} interleaved rounds "
+      f"(each a median of its runs), old = {commit}")
+cols = ["scene", "old s", "new s", "old/new", "ratios per round", "goal s", "4x met", "goal met",
+        "old contacts", "new contacts", "old tri-pairs", "new tri-pairs"]
+print("| " + " | ".join(cols) + " |")
+print("|" + "---|" * len(cols))
+for scene in new[0]:
+    o = [t[scene][0] for t in old]
+    n = [t[scene][0] for t in new]
+    om, nm = statistics.median(o), statistics.median(n)
+    goal = GOALS.get(scene)
+    per = ", ".join(f"{a / b:.2f}" for a, b in zip(o, n))
+    print(f"| {scene} | {om:.3f} | {nm:.3f} | {om / nm:.2f} | {per} | {goal or '-'} | "
+          f"{'yes' if om / nm >= 4 else 'no'} | "
+          f"{'-' if goal is None else ('yes' if nm <= goal else 'no')} | "
+          f"{old[0][scene][1]:,} | {new[0][scene][1]:,} | {old[0][scene][2]:,} | "
+          f"{new[0][scene][2]:,} |")
+EOF
+    exit 0
+fi
 
 /usr/bin/python3 - "$out" "$rounds" "$full" <<'EOF'
 import pathlib, statistics, sys
