@@ -29,7 +29,7 @@
 // degenerate queries (parallel or collinear edges, a triangle collapsed to a segment, where the
 // contacts form a curve) refine the whole curve before time advances: tens of thousands of
 // regions where this rule needs about a hundred. Both halves are examined when created; the
-// survivors are queued.
+// survivors are queued (the lower one, which the queue would serve next, is served directly).
 // Earliest time: the region served always has the smallest t0 of all queued regions, and the
 // region holding the true earliest contact (t*, u*, v*) is never excluded, so when an accepted
 // region is served its t0 <= t*: reporting toi = t0 is never late. When `max_boxes` regions have
@@ -486,9 +486,14 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
     }
     thread_local RegionQueue queue;
     queue.clear();
-    queue.push(root);
-    while (!queue.empty()) {
-        const Region r = queue.pop();
+    // The lower half of a split keeps its parent's t0, the smallest of all waiting regions, and is
+    // queued last: the queue would serve it next, so it is kept here instead of being pushed and
+    // popped (`next`). The same regions in the same order.
+    Region next = root;
+    bool have_next = true;
+    while (have_next || !queue.empty()) {
+        const Region r = have_next ? next : queue.pop();
+        have_next = false;
         if (r.split == 3) {
             result.hit = true;
             result.toi = r.t0;
@@ -518,7 +523,12 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
             }
             ++result.boxes;
             if (examine(pr, h)) {
-                queue.push(h);
+                if (i == 0) {
+                    next = h;
+                    have_next = true;
+                } else {
+                    queue.push(h);
+                }
             }
         }
     }
