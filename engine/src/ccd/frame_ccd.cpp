@@ -87,6 +87,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 namespace proxima::ccd {
@@ -145,14 +147,12 @@ class SweptBvh {
         const auto n = static_cast<std::uint32_t>(boxes.size());
         m_order.resize(n);
         std::iota(m_order.begin(), m_order.end(), 0u);
-        m_nodes.clear();
-        m_nodes.reserve(2 * ((n + LEAF_SIZE - 1) / LEAF_SIZE) + 1);
         m_centers.resize(n);
-        for (std::uint32_t t = 0; t < n; ++t) {
-            m_centers[t] = boxes[t].swept().center();
-        }
+        tbb::parallel_for(std::uint32_t{0}, n,
+                          [&](std::uint32_t t) { m_centers[t] = boxes[t].swept().center(); });
+        m_nodes.assign(n > 0 ? node_count(n) : 0, Node{});
         if (n > 0) {
-            build(boxes, 0, n);
+            build(boxes, 0, n, 0);
         }
         m_centers = {};
     }
@@ -160,11 +160,17 @@ class SweptBvh {
     const std::vector<std::uint32_t>& order() const { return m_order; }
 
   private:
-    // Median split on the longest axis of the centre bounds; depth is log2(n / LEAF_SIZE).
-    std::uint32_t build(const std::vector<FrameBox>& boxes, std::uint32_t begin,
-                        std::uint32_t end) {
-        const auto index = static_cast<std::uint32_t>(m_nodes.size());
-        m_nodes.emplace_back();
+    // Nodes of the subtree over m triangles (the split below halves m, rounding down on the left).
+    static std::uint32_t node_count(std::uint32_t m) {
+        return m <= LEAF_SIZE ? 1 : 1 + node_count(m / 2) + node_count(m - m / 2);
+    }
+
+    // Median split on the longest axis of the centre bounds; depth is log2(n / LEAF_SIZE). Node
+    // `index` and its subtree: the left child is index + 1 and the right one follows the left
+    // subtree, so the layout does not depend on the order of construction and large subtrees are
+    // built in parallel.
+    void build(const std::vector<FrameBox>& boxes, std::uint32_t begin, std::uint32_t end,
+               std::uint32_t index) {
         FrameBox box;
         Aabb cbox;
         for (auto i = begin; i < end; ++i) {
@@ -175,7 +181,7 @@ class SweptBvh {
         m_nodes[index].begin = begin;
         m_nodes[index].end = end;
         if (end - begin <= LEAF_SIZE) {
-            return index;
+            return;
         }
         const Vec3 ext = cbox.extent();
         const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
@@ -185,10 +191,16 @@ class SweptBvh {
                              return std::tie(m_centers[a][axis], a) <
                                     std::tie(m_centers[b][axis], b);
                          });
-        build(boxes, begin, mid);
-        const auto right = build(boxes, mid, end);
+        const auto right = index + 1 + node_count(mid - begin);
         m_nodes[index].right = right;
-        return index;
+        constexpr std::uint32_t PARALLEL_BELOW = 8192;  // smaller subtrees: one task
+        if (end - begin > PARALLEL_BELOW) {
+            tbb::parallel_invoke([&] { build(boxes, begin, mid, index + 1); },
+                                 [&] { build(boxes, mid, end, right); });
+        } else {
+            build(boxes, begin, mid, index + 1);
+            build(boxes, mid, end, right);
+        }
     }
 
     std::vector<Node> m_nodes;
@@ -229,42 +241,47 @@ void prepare(ObjectData& d, bool tight) {
     const auto nt = static_cast<std::uint32_t>(topo.triangle_count());
     d.edges = mesh_edges(topo);
     d.tri_edges.resize(nt);
+    tbb::parallel_for(std::uint32_t{0}, nt, [&](std::uint32_t t) {
+        const auto& tri = topo.triangle(t);
+        for (int k = 0; k < 3; ++k) {
+            d.tri_edges[t][k] = edge_index(d.edges, tri[k], tri[(k + 1) % 3]);
+        }
+    });
+    // Owners: the smallest triangle with the vertex as a corner, the edge as a side.
     d.owns.assign(nt, 0);
-    std::vector<std::uint32_t> edge_owner(d.edges.size(), NONE);
-    std::vector<std::uint32_t> vertex_owner(p0.size(), NONE);
+    std::vector<std::uint8_t> vertex_owned(p0.size(), 0);
+    std::vector<std::uint8_t> edge_owned(d.edges.size(), 0);
     for (std::uint32_t t = 0; t < nt; ++t) {
         const auto& tri = topo.triangle(t);
         for (int k = 0; k < 3; ++k) {
-            if (vertex_owner[tri[k]] == NONE) {
-                vertex_owner[tri[k]] = t;
+            if (vertex_owned[tri[k]] == 0) {
+                vertex_owned[tri[k]] = 1;
                 d.owns[t] |= static_cast<std::uint8_t>(1u << k);
             }
-            const auto e = edge_index(d.edges, tri[k], tri[(k + 1) % 3]);
-            d.tri_edges[t][k] = e;
-            if (e != NONE && edge_owner[e] == NONE) {
-                edge_owner[e] = t;
+            const auto e = d.tri_edges[t][k];
+            if (e != NONE && edge_owned[e] == 0) {
+                edge_owned[e] = 1;
                 d.owns[t] |= static_cast<std::uint8_t>(8u << k);
             }
         }
     }
     d.vertex_box.resize(p0.size());
-    for (std::size_t v = 0; v < p0.size(); ++v) {
+    tbb::parallel_for(std::size_t{0}, p0.size(), [&](std::size_t v) {
         if (tight) {
             d.vertex_box[v] = {Aabb{p0[v], p0[v]}, Aabb{p1[v], p1[v]}};
         } else {
             const Aabb b{cwise_min(p0[v], p1[v]), cwise_max(p0[v], p1[v])};
             d.vertex_box[v] = {b, b};
         }
-    }
+    });
     d.edge_box.resize(d.edges.size());
-    for (std::size_t e = 0; e < d.edges.size(); ++e) {
+    tbb::parallel_for(std::size_t{0}, d.edges.size(), [&](std::size_t e) {
         FrameBox b = d.vertex_box[d.edges[e][0]];
         b.extend(d.vertex_box[d.edges[e][1]]);
         d.edge_box[e] = b;
-    }
+    });
     d.face_box.resize(nt);
-    d.box = FrameBox{};
-    for (std::uint32_t t = 0; t < nt; ++t) {
+    tbb::parallel_for(std::uint32_t{0}, nt, [&](std::uint32_t t) {
         const auto& tri = topo.triangle(t);
         FrameBox b = d.vertex_box[tri[0]];
         b.extend(d.vertex_box[tri[1]]);
@@ -275,6 +292,9 @@ void prepare(ObjectData& d, bool tight) {
             b.at[1] = b.at[0];
         }
         d.face_box[t] = b;
+    });
+    d.box = FrameBox{};
+    for (const auto& b : d.face_box) {
         d.box.extend(b);
     }
     d.bvh.build(d.face_box);
@@ -840,7 +860,7 @@ std::vector<std::array<std::uint32_t, 2>> mesh_edges(const MeshTopology& topolog
             }
         }
     }
-    std::sort(edges.begin(), edges.end());
+    tbb::parallel_sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
     return edges;
 }
