@@ -341,6 +341,35 @@ PROXIMA_CCD_INLINE void corners_axis(const Problem& pr, int k, const double t[2]
     }
 }
 
+// g0, gu, gv of every axis at one time t, as corners_axis computes them: shared by the two halves
+// of a split (both halves of a u or v split have their parent's times; a t split's share the
+// middle).
+struct AtTime {
+    double g[3][3];
+};
+PROXIMA_CCD_INLINE void at_time(const Problem& pr, double tt, AtTime& a) {
+    const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
+    for (int k = 0; k < 3; ++k) {
+        for (int q = 0; q < 3; ++q) {
+            a.g[k][q] = omt * pr.g[k][q][0] + tt * pr.g[k][q][1];
+        }
+    }
+}
+
+// corners_axis with g0, gu, gv given at the region's two times (the same values).
+PROXIMA_CCD_INLINE void corners_axis_at(const AtTime& at0, const AtTime& at1, int k,
+                                        const double u[2], const Pair& v, Corners& fk) {
+    for (int ti = 0; ti < 2; ++ti) {
+        const double* g = (ti == 0 ? at0 : at1).g[k];
+        const Pair gvv = {g[2], g[2]};
+        for (int ui = 0; ui < 2; ++ui) {
+            const double h = g[0] - u[ui] * g[1];
+            const Pair hh = {h, h};
+            fk.q[2 * ti + ui] = hh - v * gvv;
+        }
+    }
+}
+
 // F at the 8 corners of r: f[k][4 ti + 2 ui + vi].
 inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
                     double f[3][8]) {
@@ -355,8 +384,9 @@ inline void corners(const Problem& pr, const double t[2], const double u[2], con
 }
 
 // Examines r: false when it is excluded; otherwise sets r.split (3 when accepted).
-PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r) {
-    const double t[2] = {r.t0, r.t1};
+// at0, at1: g0, gu, gv at r.t0 and r.t1 (at_time).
+PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
+                                const AtTime& at1) {
     const double u[2] = {r.u0, r.u1};
     const Pair v = {r.v0, r.v1};
     // First the exclusion test, axis by axis, computing an axis' corners only when the axes
@@ -365,7 +395,7 @@ PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r) {
     double los[3];
     double his[3];
     for (int k = 0; k < 3; ++k) {
-        corners_axis(pr, k, t, u, v, f[k]);
+        corners_axis_at(at0, at1, k, u, v, f[k]);
         const double lo = lowest(f[k]);
         const double hi = highest(f[k]);
         // Rounding is monotone and the thresholds are doubles: see the file comment.
@@ -481,7 +511,12 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
     }
     Region root{0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0, 0};
     result.boxes = 1;
-    if (!examine(pr, root)) {
+    AtTime at_lo;
+    AtTime at_mid;
+    AtTime at_hi;
+    at_time(pr, 0.0, at_lo);
+    at_time(pr, 1.0, at_hi);
+    if (!examine(pr, root, at_lo, at_hi)) {
         return result;
     }
     thread_local RegionQueue queue;
@@ -501,8 +536,14 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
         }
         Region halves[2] = {r, r};
         halves[0].depth = halves[1].depth = r.depth + 1;
+        at_time(pr, r.t0, at_lo);
+        at_time(pr, r.t1, at_hi);
+        const AtTime* times[2][2] = {{&at_lo, &at_hi}, {&at_lo, &at_hi}};
         if (r.split == 0) {
             halves[0].t1 = halves[1].t0 = 0.5 * (r.t0 + r.t1);
+            at_time(pr, halves[0].t1, at_mid);
+            times[0][1] = &at_mid;
+            times[1][0] = &at_mid;
         } else if (r.split == 1) {
             halves[0].u1 = halves[1].u0 = 0.5 * (r.u0 + r.u1);
         } else {
@@ -522,7 +563,7 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
                 return result;
             }
             ++result.boxes;
-            if (examine(pr, h)) {
+            if (examine(pr, h, *times[i][0], *times[i][1])) {
                 if (i == 0) {
                     next = h;
                     have_next = true;
