@@ -320,8 +320,8 @@ struct Job {
 CcdPoints points_of(const std::vector<ObjectData>& objects, const Candidate& c);
 
 // The primitive pairs of one job, each through the prefilter as it is found (while its triangles'
-// data is in cache, and without storing the ~97 % of pairs that the prefilter rejects): the pairs
-// the prefilter keeps go to `out`.
+// data is in cache, and without storing the pairs that the prefilter rejects, 65-98 % of them on
+// the real frame pairs): the pairs the prefilter keeps go to `out`.
 struct Traversal {
     const std::vector<ObjectData>& objects;
     double gap;
@@ -709,7 +709,7 @@ std::vector<Job> broad_phase_jobs(const std::vector<ObjectData>& objects, double
 // Broad phase, part 3, and narrow phase, fused: one parallel loop over the jobs; each job
 // traverses its node pair, puts every primitive pair through the prefilter as it is found
 // (Traversal::emit), then runs the elementary tests on the pairs the prefilter kept. Only one
-// job's kept pairs are stored per thread (the rejected ~97 % are never stored), and no thread
+// job's kept pairs are stored per thread (the rejected ones are never stored), and no thread
 // waits for another before the end (earlier, batches of jobs collected their candidates and
 // tested them in two parallel loops, with a barrier after each). The hits go to per-thread
 // lists, in no particular order.
