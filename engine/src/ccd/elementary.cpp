@@ -322,28 +322,9 @@ PROXIMA_CCD_INLINE double highest(const Corners& f) {
     return std::max(m[0], m[1]);
 }
 
-// F_k at the 8 corners: for each t, g(t) = fl(fl((1 - t) G_t0) + fl(t G_t1)) for g0, gu, gv,
-// then F = fl(fl(g0 - fl(u gu)) - fl(v gv)) in every lane.
-PROXIMA_CCD_INLINE void corners_axis(const Problem& pr, int k, const double t[2], const double u[2],
-                                     const Pair& v, Corners& fk) {
-    for (int ti = 0; ti < 2; ++ti) {
-        const double tt = t[ti];
-        const double omt = 1.0 - tt;  // exact: tt is dyadic in [0, 1]
-        const double g0 = omt * pr.g[k][0][0] + tt * pr.g[k][0][1];
-        const double gu = omt * pr.g[k][1][0] + tt * pr.g[k][1][1];
-        const double gv = omt * pr.g[k][2][0] + tt * pr.g[k][2][1];
-        const Pair gvv = {gv, gv};
-        for (int ui = 0; ui < 2; ++ui) {
-            const double h = g0 - u[ui] * gu;
-            const Pair hh = {h, h};
-            fk.q[2 * ti + ui] = hh - v * gvv;
-        }
-    }
-}
-
-// g0, gu, gv of every axis at one time t, as corners_axis computes them: shared by the two halves
-// of a split (both halves of a u or v split have their parent's times; a t split's share the
-// middle).
+// g0, gu, gv of every axis at one time t: g(t) = fl(fl((1 - t) G_t0) + fl(t G_t1)). Computed once
+// per split for both halves (both halves of a u or v split have their parent's times; a t split's
+// share the middle).
 struct AtTime {
     double g[3][3];
 };
@@ -356,9 +337,10 @@ PROXIMA_CCD_INLINE void at_time(const Problem& pr, double tt, AtTime& a) {
     }
 }
 
-// corners_axis with g0, gu, gv given at the region's two times (the same values).
-PROXIMA_CCD_INLINE void corners_axis_at(const AtTime& at0, const AtTime& at1, int k,
-                                        const double u[2], const Pair& v, Corners& fk) {
+// F_k at the 8 corners, from g0, gu, gv at the region's two times: F = fl(fl(g0 - fl(u gu)) -
+// fl(v gv)) in every lane.
+PROXIMA_CCD_INLINE void corners_axis(const AtTime& at0, const AtTime& at1, int k, const double u[2],
+                                     const Pair& v, Corners& fk) {
     for (int ti = 0; ti < 2; ++ti) {
         const double* g = (ti == 0 ? at0 : at1).g[k];
         const Pair gvv = {g[2], g[2]};
@@ -374,9 +356,13 @@ PROXIMA_CCD_INLINE void corners_axis_at(const AtTime& at0, const AtTime& at1, in
 inline void corners(const Problem& pr, const double t[2], const double u[2], const double v[2],
                     double f[3][8]) {
     const Pair vv = {v[0], v[1]};
+    AtTime at0;
+    AtTime at1;
+    at_time(pr, t[0], at0);
+    at_time(pr, t[1], at1);
     for (int k = 0; k < 3; ++k) {
         Corners fk;
-        corners_axis(pr, k, t, u, vv, fk);
+        corners_axis(at0, at1, k, u, vv, fk);
         for (int c = 0; c < 8; ++c) {
             f[k][c] = fk[c];
         }
@@ -395,7 +381,7 @@ PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
     double los[3];
     double his[3];
     for (int k = 0; k < 3; ++k) {
-        corners_axis_at(at0, at1, k, u, v, f[k]);
+        corners_axis(at0, at1, k, u, v, f[k]);
         const double lo = lowest(f[k]);
         const double hi = highest(f[k]);
         // Rounding is monotone and the thresholds are doubles: see the file comment.

@@ -105,7 +105,7 @@ Subset everything(const SceneObject& obj) {
 constexpr CcdKind VF_KIND = CcdKind::vertex_face;
 constexpr CcdKind EE_KIND = CcdKind::edge_edge;
 
-// The per-frame box test of continuous_collisions with the prefilter on (point 2 in
+// The per-frame box test of continuous_collisions with the prefilter on (point 2' in
 // frame_ccd.cpp): the points of the first primitive (pts[0, n) at t = 0, pts[4, 4 + n) at t = 1)
 // lie beyond those of the second by more than `gap` on one axis, on the same side at both frames.
 // `gap` is the engine's: (d + tol + 2^-44 s)(1 + 2^-40) + 2^-50 s + 2^-1000, s the largest
