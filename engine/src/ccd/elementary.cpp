@@ -17,25 +17,29 @@
 // it is excluded when for some axis k the interval [min_k - e_k, max_k + e_k] misses [-d, d]: then
 // no point of B has |F_k| <= d, exactly. A region of the vertex-face domain with u0 + v0 > 1 lies
 // outside the triangle and is dropped (u0, v0 are dyadic bisection points, so the sum is exact).
-// A surviving region is accepted as a contact when on every axis [min_k, max_k] lies within
-// [-(d + tol + e_k), d + tol + e_k] (every point of it is within d + tol + 2 e_k of touching on
-// every axis) and its time interval is at most toi_tolerance wide (such a region that is wider is
-// bisected in t), or when no side of it may be split any more (all widths at the 2^-50 floor).
+// It is also excluded along a few directions: fixed ones per test (see add_direction) and the
+// region normal of its own time interval (see RegionNormal).
+// The region served is accepted as a contact when its time interval is at most toi_tolerance wide
+// and a point of it at t1 is within the band on every axis (see "Point certificate"), or when on
+// every axis [min_k, max_k] lies within [-(d + tol + e_k), d + tol + e_k] (every point of it is
+// within d + tol + 2 e_k of touching on every axis) and its time interval is at most
+// toi_tolerance wide (such a region that is wider is bisected in t), or when no side of it may be
+// split any more (all widths at the 2^-50 floor).
 // Otherwise it is bisected along the parameter most likely to let a half be excluded: for each
 // axis not yet within the tolerance, the slack is how far its range reaches past the far end of
 // [-d - e, d + e] (a half is excluded once a split removes more than that from one side), and
 // the score of t, u or v is the largest ratio of its contribution to the axis' range (the largest
-// corner difference along it) to that slack. Splitting by raw contribution instead makes
-// degenerate queries (parallel or collinear edges, a triangle collapsed to a segment, where the
-// contacts form a curve) refine the whole curve before time advances: tens of thousands of
-// regions where this rule needs about a hundred. Both halves are examined when created; the
-// survivors are queued (the lower one, which the queue would serve next, is served directly).
-// Earliest time: the region served always has the smallest t0 of all queued regions, and the
-// region holding the true earliest contact (t*, u*, v*) is never excluded, so when an accepted
-// region is served its t0 <= t*: reporting toi = t0 is never late. When `max_boxes` regions have
-// been examined the test stops and reports a contact at the t0 of the region being refined (no
-// later than any region not yet excluded), flagged `capped`. Every examined region costs the same
-// bounded work (8 corners), so the work per test is bounded by max_boxes.
+// corner difference along it) to that slack (the region normal's range counts too, see examine).
+// Splitting by raw contribution instead makes degenerate queries (parallel or collinear edges, a
+// triangle collapsed to a segment, where the contacts form a curve) refine the whole curve before
+// time advances: tens of thousands of regions where this rule needs about a hundred. Both halves
+// are examined when created; the survivors are queued (the lower one, which the queue would serve
+// next, is served directly). Earliest time: the region served always has the smallest t0 of all
+// queued regions, and the region holding the true earliest contact (t*, u*, v*) is never excluded,
+// so when a region is accepted its t0 <= t*: reporting toi = t0 is never late. When `max_boxes`
+// regions have been examined the test stops and reports a contact at the t0 of the region being
+// refined (no later than any region not yet excluded), flagged `capped`. Every examined region
+// costs the same bounded work (8 corners), so the work per test is bounded by max_boxes.
 //
 // Rounding (u = 2^-53, the unit roundoff; all t, u, v are dyadic in [0, 1] with at most 50
 // fractional bits, so 1 - t is exact). Per axis k let M be the largest |coordinate| of the 8
@@ -110,6 +114,9 @@ struct Problem {
     int directions = 0;
     double w[4][3] = {};
     double w_thr[4] = {};
+    // The region normal (see "Region normal" below): only when no axis is scaled (M_k <= 2^200).
+    bool region_normal = false;
+    double largest[3] = {};  // M_k
     bool valid = false;
 };
 
@@ -179,21 +186,23 @@ double scale_up(double x) {
     return s * 0x1p64 < x ? std::nextafter(s, std::numeric_limits<double>::infinity()) : s;
 }
 
-// Direction exclusion. An accepted region's corner (t0, u0, v0) has exact |F_k| <= a_k :=
+// Direction exclusion. An accepted region holds a point with exact |F_k| <= a_k :=
 // d + tol + 2^-45 M_k + 2^-1059 on every axis (see the prefilter's comment below: d + tol + 2 e_k
-// when accepted within the band, d + 2^-45 M_k at the width floor), so |F . w| <= sum |w_k| a_k
-// there. F . w is multilinear in (t, u, v) like each F_k, so over a region it lies between its
-// values at the 8 corners; if those all exceed sum |w_k| a_k (or all lie below its negative), no
-// region inside is ever accepted, and excluding it cannot change which accepted region has the
-// smallest t0. The computed corner value fl(w_0 f_0 + w_1 f_1 + w_2 f_2), with |w_k| <= 1, each
-// f_k within 40 u M_k of the exact F_k and |f_k| <= 6 M_k (+ rounding), errs by at most
-// sum |w_k| (40 + 19) u M_k plus a few 2^-1075 of underflow: below 2^-47 sum |w_k| M_k + 2^-1070.
-// The threshold w_thr = sum |w_k| (d + tol + 2^-44 M_k) (1 + 2^-40) + 2^-1000 covers a_k, that
-// error, and its own roundings (relative < 8 u). Only when no axis is scaled (M_k <= 2^200, so
-// products cannot overflow) and w is finite and nonzero; w is divided by its largest |component|
-// so that |w_k| <= 1. Which w is tried changes only how many regions are examined: the normal of
-// the triangle (vf) or the common normal of the edges (ee) at mid-frame, and the in-plane normals
-// of the triangle's sides (vf) or of the two edges (ee).
+// at the certificate's point or the corner of a region within the band, d + 2^-45 M_k at the width
+// floor), so |F . w| <= sum |w_k| a_k there. F . w is multilinear in (t, u, v) like each F_k, so
+// over a region it lies between its values at the 8 corners; if those all exceed sum |w_k| a_k (or
+// all lie below its negative), no region inside is ever accepted, and excluding it cannot change
+// which accepted region has the smallest t0. The computed corner value fl(w_0 f_0 + w_1 f_1 + w_2
+// f_2), with |w_k| <= 1, each f_k within 40 u M_k of the exact F_k and |f_k| <= 6 M_k (+ rounding),
+// errs by at most sum |w_k| (40 + 19) u M_k plus a few 2^-1075 of underflow: below 2^-47 sum |w_k|
+// M_k + 2^-1070. The threshold w_thr = sum |w_k| (d + tol + 2^-44 M_k) (1 + 2^-40) + 2^-1000 covers
+// a_k, that error, and its own roundings (relative < 8 u). Only when no axis is scaled (M_k <=
+// 2^200, so products cannot overflow) and w is finite and nonzero; w is divided by its largest
+// |component| so that |w_k| <= 1. Which w is tried changes only how many regions are examined: the
+// in-plane normals of the triangle's sides (vf) or of the two edges (ee) at mid-frame. (The
+// normal of the triangle or the edges' common normal at mid-frame was one too, until the region
+// normal, tested at each region's own time with the tighter threshold d, made it redundant: the
+// solver was 4-7 % faster on the real frames' tests without it, with 0-3 % more regions.)
 void add_direction(Problem& pr, const Vec3& n, const double largest[3], double d, double tol) {
     const double big = std::max({std::abs(n.x), std::abs(n.y), std::abs(n.z)});
     if (!(big > 0.0) || !std::isfinite(big)) {
@@ -228,7 +237,6 @@ void add_directions(Problem& pr, const CcdPoints& points, const double largest[3
     }
     if (pr.vertex_face) {
         const Vec3 n = cross(mid[2] - mid[1], mid[3] - mid[1]);
-        add_direction(pr, n, largest, d, tol);
         for (int j = 0; j < 3; ++j) {
             add_direction(pr, cross(n, mid[1 + (j + 1) % 3] - mid[1 + j]), largest, d, tol);
         }
@@ -236,7 +244,6 @@ void add_directions(Problem& pr, const CcdPoints& points, const double largest[3
         const Vec3 da = mid[1] - mid[0];
         const Vec3 db = mid[3] - mid[2];
         const Vec3 n = cross(da, db);
-        add_direction(pr, n, largest, d, tol);
         add_direction(pr, cross(n, da), largest, d, tol);
         add_direction(pr, cross(n, db), largest, d, tol);
     }
@@ -281,7 +288,9 @@ Problem make_problem(CcdKind kind, const CcdPoints& points, double d, double tol
         pr.reject[k] = dk;
         pr.accept[k] = dk + tk + pr.error[k];
         largest[k] = m;
+        pr.largest[k] = m;
     }
+    pr.region_normal = largest[0] <= 0x1p200 && largest[1] <= 0x1p200 && largest[2] <= 0x1p200;
     pr.valid = true;
     if (directions) {
         add_directions(pr, points, largest, d, tol);
@@ -337,6 +346,55 @@ PROXIMA_CCD_INLINE void at_time(const Problem& pr, double tt, AtTime& a) {
     }
 }
 
+// Region normal. Fixed directions lose their grip near a contact: the primitives rotate, so F . w
+// still varies with u and v unless u and v are narrowed as far as t is, and a traced cloth hit
+// needed ~56 bisections (u ~2^-19, v ~2^-17, t ~2^-20) to be excluded up to its contact and
+// accepted. So every region is also tested along the normal of the primitives at the middle of its
+// own time interval: w = gu(tm) x gv(tm) (the triangle's normal for vf, the edges' common normal
+// for ee), from the sums gu(t0) + gu(t1), gv(t0) + gv(t1) (any w is valid; this one is orthogonal
+// to the directions u and v move F along at tm, so F . w barely depends on u and v across a narrow
+// time interval and the region is excluded by splitting t alone). w is divided by its largest
+// |component| (|w_k| <= 1). The region is excluded when F . w > thr at all 8 corners (or < -thr)
+// with thr = sum |w_k| (d + 2^-44 M_k) (1 + 2^-40) + 2^-1000: the computed corner value errs by
+// less than 2^-47 sum |w_k| M_k + 2^-1070 (see the fixed directions below), and |F . w| <=
+// |F|_inf |w|_1 <= d |w|_1 at a point within d, so such a region holds no point within d of
+// touching, and F . w is multilinear, so the corners bound it. Unlike the fixed directions it does
+// not leave room for d + tol: a region whose points are all within the band but none within d is
+// excluded too (a resting pair inside the band is refined towards its true contact, or found
+// apart). Only when no axis is scaled (M_k <= 2^200: no product overflows) and w is finite and
+// nonzero.
+struct RegionNormal {
+    bool valid = false;
+    double w[3] = {};
+    double thr = 0.0;
+};
+PROXIMA_CCD_INLINE void region_normal(const Problem& pr, const AtTime& at0, const AtTime& at1,
+                                      RegionNormal& rn) {
+    rn.valid = false;
+    if (!pr.region_normal) {
+        return;
+    }
+    double gu[3];
+    double gv[3];
+    for (int k = 0; k < 3; ++k) {
+        gu[k] = at0.g[k][1] + at1.g[k][1];
+        gv[k] = at0.g[k][2] + at1.g[k][2];
+    }
+    const double n[3] = {gu[1] * gv[2] - gu[2] * gv[1], gu[2] * gv[0] - gu[0] * gv[2],
+                         gu[0] * gv[1] - gu[1] * gv[0]};
+    const double big = std::max({std::abs(n[0]), std::abs(n[1]), std::abs(n[2])});
+    if (!(big > 0.0) || !(big < std::numeric_limits<double>::infinity())) {
+        return;
+    }
+    double thr = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        rn.w[k] = n[k] / big;
+        thr += std::abs(rn.w[k]) * (pr.reject[k] + 0x1p-44 * pr.largest[k]);
+    }
+    rn.thr = thr * (1.0 + 0x1p-40) + 0x1p-1000;
+    rn.valid = true;
+}
+
 // F_k at the 8 corners, from g0, gu, gv at the region's two times: F = fl(fl(g0 - fl(u gu)) -
 // fl(v gv)) in every lane.
 PROXIMA_CCD_INLINE void corners_axis(const AtTime& at0, const AtTime& at1, int k, const double u[2],
@@ -369,10 +427,39 @@ inline void corners(const Problem& pr, const double t[2], const double u[2], con
     }
 }
 
+// F . w at the 8 corners from the axes' corner values.
+PROXIMA_CCD_INLINE void corners_along(const Corners f[3], const double w[3], Corners& x) {
+    const Pair w0 = {w[0], w[0]};
+    const Pair w1 = {w[1], w[1]};
+    const Pair w2 = {w[2], w[2]};
+    for (int j = 0; j < 4; ++j) {
+        x.q[j] = w0 * f[0].q[j] + w1 * f[1].q[j] + w2 * f[2].q[j];
+    }
+}
+
+// Split scores of one axis or direction with corner values f, range [lo, hi] and exclusion
+// window [-window, window]: how many times the contribution of t, u, v to the range (the largest
+// corner difference along it) exceeds the slack (how far the range reaches past the far end of the
+// window, plus `pad`; a half is excluded once a split removes more than that from one side).
+PROXIMA_CCD_INLINE void add_scores(const Corners& f, double lo, double hi, double window,
+                                   double pad, double& dt, double& du, double& dv) {
+    const double inv_slack = 1.0 / (std::min(hi + window, window - lo) + pad);
+    // The largest change along t (corners c and c + 4), u (c, c + 2), v (c, c + 1).
+    const Pair mt = pair_max(pair_abs(f.q[2] - f.q[0]), pair_abs(f.q[3] - f.q[1]));
+    const Pair mu = pair_max(pair_abs(f.q[1] - f.q[0]), pair_abs(f.q[3] - f.q[2]));
+    Pair mv = pair_abs(f.q[0] - __builtin_shufflevector(f.q[0], f.q[0], 1, 0));
+    for (int j = 1; j < 4; ++j) {
+        mv = pair_max(mv, pair_abs(f.q[j] - __builtin_shufflevector(f.q[j], f.q[j], 1, 0)));
+    }
+    dt = std::max(dt, std::max(mt[0], mt[1]) * inv_slack);
+    du = std::max(du, std::max(mu[0], mu[1]) * inv_slack);
+    dv = std::max(dv, mv[0] * inv_slack);  // both lanes hold the same magnitudes
+}
+
 // Examines r: false when it is excluded; otherwise sets r.split (3 when accepted).
-// at0, at1: g0, gu, gv at r.t0 and r.t1 (at_time).
-PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
-                                const AtTime& at1) {
+// at0, at1: g0, gu, gv at r.t0 and r.t1 (at_time); rn: the region normal of [r.t0, r.t1].
+PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0, const AtTime& at1,
+                                const RegionNormal& rn) {
     const double u[2] = {r.u0, r.u1};
     const Pair v = {r.v0, r.v1};
     // First the exclusion test, axis by axis, computing an axis' corners only when the axes
@@ -395,47 +482,35 @@ PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
     // corner. A region within the band on every axis never passes it, but such regions are rare:
     // no shortcut for them.
     for (int i = 0; i < pr.directions; ++i) {
-        const double* w = pr.w[i];
-        const Pair w0 = {w[0], w[0]};
-        const Pair w1 = {w[1], w[1]};
-        const Pair w2 = {w[2], w[2]};
         Corners x;
-        for (int j = 0; j < 4; ++j) {
-            x.q[j] = w0 * f[0].q[j] + w1 * f[1].q[j] + w2 * f[2].q[j];
-        }
+        corners_along(f, pr.w[i], x);
         if (lowest(x) > pr.w_thr[i] || highest(x) < -pr.w_thr[i]) {
             return false;
         }
     }
+    // And the region normal (see RegionNormal).
+    Corners nx{};
+    double n_lo = 0.0;
+    double n_hi = 0.0;
+    if (rn.valid) {
+        corners_along(f, rn.w, nx);
+        n_lo = lowest(nx);
+        n_hi = highest(nx);
+        if (n_lo > rn.thr || n_hi < -rn.thr) {
+            return false;
+        }
+    }
     bool accepted = true;
-    // Split scores: how many times the contribution of t, u, v to an axis' range exceeds that
-    // axis' slack (how far the range reaches past the far end of [-d - e, d + e]).
+    // Split scores of the axes not yet within the tolerance, and of the region normal.
     double dt = 0.0;
     double du = 0.0;
     double dv = 0.0;
     for (int k = 0; k < 3; ++k) {
-        const Corners& fk = f[k];
-        const double lo = los[k];
-        const double hi = his[k];
-        if (hi <= pr.accept[k] && lo >= -pr.accept[k]) {
+        if (his[k] <= pr.accept[k] && los[k] >= -pr.accept[k]) {
             continue;  // this axis is within the tolerance
         }
         accepted = false;
-        const double window = pr.reject[k] + pr.error[k];
-        const double inv_slack = 1.0 / (std::min(hi + window, window - lo) + pr.error[k]);
-        // The largest change along t (corners c and c + 4), u (c, c + 2), v (c, c + 1).
-        const Pair mt = pair_max(pair_abs(fk.q[2] - fk.q[0]), pair_abs(fk.q[3] - fk.q[1]));
-        const Pair mu = pair_max(pair_abs(fk.q[1] - fk.q[0]), pair_abs(fk.q[3] - fk.q[2]));
-        Pair mv = pair_abs(fk.q[0] - __builtin_shufflevector(fk.q[0], fk.q[0], 1, 0));
-        for (int j = 1; j < 4; ++j) {
-            mv = pair_max(mv, pair_abs(fk.q[j] - __builtin_shufflevector(fk.q[j], fk.q[j], 1, 0)));
-        }
-        const double ct = std::max(mt[0], mt[1]);
-        const double cu = std::max(mu[0], mu[1]);
-        const double cv = mv[0];  // both lanes hold the same magnitudes
-        dt = std::max(dt, ct * inv_slack);
-        du = std::max(du, cu * inv_slack);
-        dv = std::max(dv, cv * inv_slack);
+        add_scores(f[k], los[k], his[k], pr.reject[k] + pr.error[k], pr.error[k], dt, du, dv);
     }
     if (accepted) {
         // Within the tolerance on every axis: a contact once its time interval is narrow enough
@@ -443,6 +518,22 @@ PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
         // the toi is within toi_tolerance of the earliest time the band is reached.
         r.split = r.t1 - r.t0 > pr.toi_width && r.t1 - r.t0 > MIN_WIDTH ? 0 : 3;
         return true;
+    }
+    if (rn.valid && std::max(n_hi, -n_lo) > 16.0 * rn.thr) {
+        // Near a contact F . w changes with t and barely with u and v: its scores ask for t splits
+        // where the axes' ask for u and v. Counted only where t dominates them (by 2x) and the
+        // range reaches well past the threshold; otherwise (primitives moving within one plane,
+        // F . w near 0 throughout) its slack is tiny and its scores would ask for splits that
+        // never exclude anything: 30 pairs of rod-twist went from < 50 to thousands of regions.
+        double nt = 0.0;
+        double nu = 0.0;
+        double nv = 0.0;
+        add_scores(nx, n_lo, n_hi, rn.thr, 0x1p-1000, nt, nu, nv);
+        if (nt >= 2.0 * (nu + nv)) {
+            dt = std::max(dt, nt);
+            du = std::max(du, nu);
+            dv = std::max(dv, nv);
+        }
     }
     // Bisect the parameter most likely to exclude a half (the largest score), among those still
     // wider than the floor; a region that may not be split any more is accepted.
@@ -465,6 +556,123 @@ PROXIMA_CCD_INLINE bool examine(const Problem& pr, Region& r, const AtTime& at0,
         r.split = 2;
     }
     return true;
+}
+
+// Point certificate. The region served has the smallest t0 of all regions not excluded, so its t0
+// is never later than the earliest contact; it may be reported as soon as the primitives are
+// shown to be within the band somewhere in it. When its time interval is at most toi_tolerance
+// wide, the solver looks for one point (t1, u, v) of the region with computed |F_k| <= d + tol +
+// e_k on every axis (exact |F_k| <= d + tol + 2 e_k): the (u, v) nearest to touching at t1 (least
+// squares on g0 - u gu - v gv), clamped into the region, else the nearest point on each side of
+// the region's (u, v) rectangle (and on u + v = 1 for vf). F is computed at it by the corner
+// formula, whose rounding bound holds for any u, v in [0, 1] (only t needs to be dyadic, for 1 - t
+// to be exact). Without it a region had to lie within the band as a whole, so u and v were
+// bisected until their width times the primitives' size was below tol: ~2^-19 on cloth frames.
+
+// u + v <= 1 exactly (u, v in [0, 1]; the rounding error of the sum by Knuth's two-sum).
+PROXIMA_CCD_INLINE bool sum_at_most_one(double u, double v) {
+    const double sum = u + v;
+    const double vv = sum - u;
+    const double err = (u - (sum - vv)) + (v - vv);
+    return sum < 1.0 || (sum == 1.0 && err <= 0.0);
+}
+
+// The point (t1, u, v) moved into r (and, for vf, into the triangle); true when it is within the
+// band on every axis. a: g0, gu, gv at r.t1.
+PROXIMA_CCD_INLINE bool within_band_at(const Problem& pr, const AtTime& a, const Region& r,
+                                       double u, double v) {
+    u = std::clamp(u, r.u0, r.u1);
+    v = std::clamp(v, r.v0, r.v1);
+    if (!(u >= r.u0 && u <= r.u1 && v >= r.v0 && v <= r.v1)) {
+        return false;  // NaN
+    }
+    if (pr.vertex_face && !sum_at_most_one(u, v)) {
+        // r.u0 + r.v0 <= 1 (other regions are dropped); 1 - u may round up: step down.
+        v = std::max(std::min(v, 1.0 - u), r.v0);
+        u = std::max(std::min(u, 1.0 - v), r.u0);
+        for (int step = 0; step < 4 && !sum_at_most_one(u, v); ++step) {
+            if (v > r.v0) {
+                v = std::max(std::nextafter(v, 0.0), r.v0);
+            } else {
+                u = std::max(std::nextafter(u, 0.0), r.u0);
+            }
+        }
+        if (!sum_at_most_one(u, v)) {
+            return false;
+        }
+    }
+    for (int k = 0; k < 3; ++k) {
+        const double h = a.g[k][0] - u * a.g[k][1];
+        const double fk = h - v * a.g[k][2];
+        if (!(std::abs(fk) <= pr.accept[k])) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// The s minimizing |h - s gd| (0 when gd = 0).
+PROXIMA_CCD_INLINE double line_minimum(const double h[3], const double gd[3]) {
+    const double num = h[0] * gd[0] + h[1] * gd[1] + h[2] * gd[2];
+    const double den = gd[0] * gd[0] + gd[1] * gd[1] + gd[2] * gd[2];
+    return den > 0.0 ? num / den : 0.0;
+}
+
+PROXIMA_CCD_INLINE bool certified(const Problem& pr, const AtTime& a, const Region& r) {
+    double g0[3];
+    double gu[3];
+    double gv[3];
+    for (int k = 0; k < 3; ++k) {
+        g0[k] = a.g[k][0];
+        gu[k] = a.g[k][1];
+        gv[k] = a.g[k][2];
+    }
+    const double a00 = gu[0] * gu[0] + gu[1] * gu[1] + gu[2] * gu[2];
+    const double a01 = gu[0] * gv[0] + gu[1] * gv[1] + gu[2] * gv[2];
+    const double a11 = gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2];
+    const double b0 = g0[0] * gu[0] + g0[1] * gu[1] + g0[2] * gu[2];
+    const double b1 = g0[0] * gv[0] + g0[1] * gv[1] + g0[2] * gv[2];
+    const double det = a00 * a11 - a01 * a01;
+    if (det > 0x1p-80 * a00 * a11) {
+        const double u = (b0 * a11 - b1 * a01) / det;
+        const double v = (a00 * b1 - a01 * b0) / det;
+        if (within_band_at(pr, a, r, u, v)) {
+            return true;
+        }
+        if (u >= r.u0 && u <= r.u1 && v >= r.v0 && v <= r.v1 && (!pr.vertex_face || u + v <= 1.0)) {
+            return false;  // the nearest point is inside r, and not within the band
+        }
+    }
+    double h[3];
+    for (const double u : {r.u0, r.u1}) {
+        for (int k = 0; k < 3; ++k) {
+            h[k] = g0[k] - u * gu[k];
+        }
+        if (within_band_at(pr, a, r, u, line_minimum(h, gv))) {
+            return true;
+        }
+    }
+    for (const double v : {r.v0, r.v1}) {
+        for (int k = 0; k < 3; ++k) {
+            h[k] = g0[k] - v * gv[k];
+        }
+        if (within_band_at(pr, a, r, line_minimum(h, gu), v)) {
+            return true;
+        }
+    }
+    if (pr.vertex_face && r.u1 + r.v1 > 1.0) {
+        // u + v = 1: F = (g0 - gv) - u (gu - gv).
+        double hd[3];
+        for (int k = 0; k < 3; ++k) {
+            h[k] = g0[k] - gv[k];
+            hd[k] = gu[k] - gv[k];
+        }
+        const double u = line_minimum(h, hd);
+        if (within_band_at(pr, a, r, u, 1.0 - u)) {
+            return true;
+        }
+    }
+    return false;
 }
 
 PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& points,
@@ -502,7 +710,9 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
     AtTime at_hi;
     at_time(pr, 0.0, at_lo);
     at_time(pr, 1.0, at_hi);
-    if (!examine(pr, root, at_lo, at_hi)) {
+    RegionNormal normals[2];
+    region_normal(pr, at_lo, at_hi, normals[0]);
+    if (!examine(pr, root, at_lo, at_hi, normals[0])) {
         return result;
     }
     thread_local RegionQueue queue;
@@ -520,20 +730,32 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
             result.toi = r.t0;
             return result;
         }
-        Region halves[2] = {r, r};
-        halves[0].depth = halves[1].depth = r.depth + 1;
         at_time(pr, r.t0, at_lo);
         at_time(pr, r.t1, at_hi);
+        if (r.t1 - r.t0 <= pr.toi_width && certified(pr, at_hi, r)) {
+            result.hit = true;
+            result.toi = r.t0;
+            return result;
+        }
+        Region halves[2] = {r, r};
+        halves[0].depth = halves[1].depth = r.depth + 1;
         const AtTime* times[2][2] = {{&at_lo, &at_hi}, {&at_lo, &at_hi}};
+        const RegionNormal* rn[2] = {&normals[0], &normals[0]};
         if (r.split == 0) {
             halves[0].t1 = halves[1].t0 = 0.5 * (r.t0 + r.t1);
             at_time(pr, halves[0].t1, at_mid);
             times[0][1] = &at_mid;
             times[1][0] = &at_mid;
-        } else if (r.split == 1) {
-            halves[0].u1 = halves[1].u0 = 0.5 * (r.u0 + r.u1);
+            region_normal(pr, at_lo, at_mid, normals[0]);
+            region_normal(pr, at_mid, at_hi, normals[1]);
+            rn[1] = &normals[1];
         } else {
-            halves[0].v1 = halves[1].v0 = 0.5 * (r.v0 + r.v1);
+            region_normal(pr, at_lo, at_hi, normals[0]);
+            if (r.split == 1) {
+                halves[0].u1 = halves[1].u0 = 0.5 * (r.u0 + r.u1);
+            } else {
+                halves[0].v1 = halves[1].v0 = 0.5 * (r.v0 + r.v1);
+            }
         }
         // The upper half first, so that the lower one is served first among equal t0.
         for (int i = 1; i >= 0; --i) {
@@ -549,7 +771,7 @@ PROXIMA_CCD_INLINE ElementaryResult solve_body(CcdKind kind, const CcdPoints& po
                 return result;
             }
             ++result.boxes;
-            if (examine(pr, h, *times[i][0], *times[i][1])) {
+            if (examine(pr, h, *times[i][0], *times[i][1], *rn[i])) {
                 if (i == 0) {
                     next = h;
                     have_next = true;
@@ -624,8 +846,9 @@ ElementaryResult elementary_portable(CcdKind kind, const CcdPoints& points,
 // The prefilter (elementary_prefilter_rejects; docs/algorithms.md, "CCD prefilter"). What it
 // must respect: the solver reports an uncapped hit only when some point (t, u, v) of the domain
 // has exact |F_k| <= d + tol + 2^-45 M on every axis k (M the largest |coordinate| of the 8
-// points). For an accepted region that point is its corner (t0, u0, v0), which lies in the domain
-// (u0 + v0 <= 1 is checked for vf), with computed |F_k| <= d + tol + e_k, so exact
+// points). For a region accepted by the point certificate that point is (t1, u, v), in the domain
+// (u + v <= 1 checked exactly for vf); for one within the band as a whole, its corner (t0, u0, v0)
+// (u0 + v0 <= 1 is checked for vf); either with computed |F_k| <= d + tol + e_k, so exact
 // <= d + tol + 2 e_k = d + tol + M_k 2^-46 (+ 2^-1059, negligible under the guard M >= 2^-300).
 // A region accepted at the width floor passed the exclusion test on every axis (some corner within
 // d + 2 e_k exactly) while F_k = g0 - u gu - v gv varies by at most (12 + 2 + 2) M 2^-50 across
