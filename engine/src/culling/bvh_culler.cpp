@@ -294,12 +294,19 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     }
     auto leaves = [&](const Bvh::Node& x, const Bvh::Node& y, bool same_node) {
         double ty[Bvh::LEAF_SIZE];
+        double ty_max = 0.0;
         for (std::uint32_t q = 0; q < y.count; ++q) {
             ty[q] = threshold_of(order[y.first + q]);
+            ty_max = std::max(ty_max, ty[q]);
         }
         for (std::uint32_t p = 0; p < x.count; ++p) {
             const auto t = order[x.first + p];
             const double tt = same_node ? ty[p] : threshold_of(t);
+            // The leaf's box holds each of its triangles' boxes, so a triangle that the leaf's
+            // box already culls against every threshold involved is culled against each triangle.
+            if (!same_node && box_squared_distance(boxes[t], y.box) >= std::max(tt, ty_max)) {
+                continue;
+            }
             for (std::uint32_t q = same_node ? p + 1 : 0; q < y.count; ++q) {
                 const auto u = order[y.first + q];
                 if (share_vertex(tris[t], tris[u])) {

@@ -7,9 +7,15 @@ namespace proxima {
 
 namespace {
 
-// Signed distances of q's vertices to p's plane are linear over q, so the smallest absolute value
-// among them, when all share a sign, bounds every point of q away from the plane and so from p.
-double one_side(const Triangle& p, const Triangle& q) {
+// p's plane, as one_side uses it: the unnormalised normal n, |n| (0: not trusted) and the
+// product of p's two edge lengths from p[0] (for the error term).
+struct PlaneFrame {
+    Vec3 n;
+    double nn;
+    double l1l2;
+};
+
+PlaneFrame plane_frame(const Triangle& p) {
     const Vec3 e1 = p[1] - p[0];
     const Vec3 e2 = p[2] - p[0];
     const Vec3 n = cross(e1, e2);
@@ -18,8 +24,19 @@ double one_side(const Triangle& p, const Triangle& q) {
     // The unit normal's rounding error grows like eps * |e1||e2| / |n|: past 1e6 (a sliver) the
     // bound is not worth its error term.
     if (!(nn > 1e-6 * l1l2)) {
+        return {n, 0.0, l1l2};
+    }
+    return {n, nn, l1l2};
+}
+
+// Signed distances of q's vertices to p's plane are linear over q, so the smallest absolute value
+// among them, when all share a sign, bounds every point of q away from the plane and so from p.
+double one_side(const Triangle& p, const PlaneFrame& f, const Triangle& q) {
+    if (!(f.nn > 0.0)) {
         return 0.0;
     }
+    const Vec3& n = f.n;
+    const double nn = f.nn;
     const double s0 = dot(n, q[0] - p[0]);
     const double s1 = dot(n, q[1] - p[0]);
     const double s2 = dot(n, q[2] - p[0]);
@@ -31,18 +48,28 @@ double one_side(const Triangle& p, const Triangle& q) {
     } else {
         return 0.0;
     }
-    const double reach = std::max({norm(q[0] - p[0]), norm(q[1] - p[0]), norm(q[2] - p[0])});
+    // One square root of the largest square: the same value as the largest norm (sqrt is
+    // monotone and correctly rounded).
+    const double reach = std::sqrt(std::max(
+        {squared_norm(q[0] - p[0]), squared_norm(q[1] - p[0]), squared_norm(q[2] - p[0])}));
     // Error of m / nn: the normal's direction error (eps * l1l2 / nn, times a small constant) times
     // the lever arm, plus the dot product's own rounding.
-    const double err = 64.0 * std::numeric_limits<double>::epsilon() * (l1l2 / nn + 1.0) * reach;
+    const double err = 64.0 * std::numeric_limits<double>::epsilon() * (f.l1l2 / nn + 1.0) * reach;
     return m / nn - err;
 }
 
 }  // namespace
 
-double axis_lower_bound(const Triangle& a, const Triangle& b, double slack) {
-    const Vec3 ca = (a[0] + a[1] + a[2]) / 3.0;
-    const Vec3 axis = (b[0] + b[1] + b[2]) / 3.0 - ca;
+namespace {
+
+Vec3 centroid_of(const Triangle& a) {
+    return (a[0] + a[1] + a[2]) / 3.0;
+}
+
+// axis_lower_bound with the two centroids given.
+double axis_bound(const Triangle& a, const Vec3& ca, const Triangle& b, const Vec3& cb,
+                  double slack) {
+    const Vec3 axis = cb - ca;
     const double len = norm(axis);
     if (!(len > 0.0)) {
         return 0.0;
@@ -58,15 +85,24 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     }
     // Any unit direction gives a valid bound, so the axis's own rounding costs nothing; what is
     // left is the rounding of the differences and dot products, relative to the extent involved.
-    double reach = 0.0;
+    // One square root of the largest square: the same value as the largest norm (sqrt is
+    // monotone and correctly rounded).
+    double reach_sq = 0.0;
     for (const auto& p : a) {
-        reach = std::max(reach, norm(p - ca));
+        reach_sq = std::max(reach_sq, squared_norm(p - ca));
     }
     for (const auto& p : b) {
-        reach = std::max(reach, norm(p - ca));
+        reach_sq = std::max(reach_sq, squared_norm(p - ca));
     }
+    const double reach = std::sqrt(reach_sq);
     const double lb = gap - 64.0 * std::numeric_limits<double>::epsilon() * reach - slack;
     return lb > 0.0 ? lb : 0.0;
+}
+
+}  // namespace
+
+double axis_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    return axis_bound(a, centroid_of(a), b, centroid_of(b), slack);
 }
 
 EdgeFrame edge_frame(const Triangle& a) {
@@ -74,7 +110,12 @@ EdgeFrame edge_frame(const Triangle& a) {
     // of the in-plane directions and of their normalisation costs nothing; a's own extent along
     // each is taken from all three corners, not assumed zero at the edge.
     EdgeFrame f;
-    const Vec3 n = cross(a[1] - a[0], a[2] - a[0]);
+    const PlaneFrame plane = plane_frame(a);
+    f.plane = plane.n;
+    f.plane_norm = plane.nn;
+    f.plane_l1l2 = plane.l1l2;
+    f.centroid = centroid_of(a);
+    const Vec3& n = plane.n;
     for (int i = 0; i < 3; ++i) {
         const Vec3& p = a[i];
         const Vec3& q = a[i == 2 ? 0 : i + 1];
@@ -167,11 +208,11 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    lb = std::max(lb, plane_lower_bound(a, b, slack));
+    lb = std::max(lb, plane_lower_bound(a, fa, b, fb, slack));
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    return std::max(lb, axis_lower_bound(a, b, slack));
+    return std::max(lb, axis_bound(a, fa.centroid, b, fb.centroid, slack));
 }
 
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {
@@ -179,7 +220,16 @@ double lower_bound_until(const Triangle& a, const Triangle& b, double slack, dou
 }
 
 double plane_lower_bound(const Triangle& a, const Triangle& b, double slack) {
-    const double lb = std::max(one_side(a, b), one_side(b, a)) - slack;
+    const double lb =
+        std::max(one_side(a, plane_frame(a), b), one_side(b, plane_frame(b), a)) - slack;
+    return lb > 0.0 ? lb : 0.0;
+}
+
+double plane_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                         const EdgeFrame& fb, double slack) {
+    const double lb = std::max(one_side(a, {fa.plane, fa.plane_norm, fa.plane_l1l2}, b),
+                               one_side(b, {fb.plane, fb.plane_norm, fb.plane_l1l2}, a)) -
+                      slack;
     return lb > 0.0 ? lb : 0.0;
 }
 

@@ -67,17 +67,27 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
 // of a triangle between them. Never above the computed distance by more than its rounding slack.
 double edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
-// What the edge bound needs of one triangle alone, so that a search can compute it once per
-// triangle rather than once per pair: each edge's unit in-plane normal (away from the third
-// corner) and the triangle's extent beyond the edge along it (0 up to rounding).
+// What the edge, plane and axis bounds need of one triangle alone, so that a search can compute it
+// once per triangle rather than once per pair: each edge's unit in-plane normal (away from the
+// third corner) and the triangle's extent beyond the edge along it (0 up to rounding); the
+// (unnormalised) plane normal, its length (0 where the plane is not trusted: a sliver) and the
+// product of the lengths of the edges from the first corner (the plane bound's error term); the
+// centroid (the axis bound's).
 struct EdgeFrame {
     Vec3 normal[3];
     double extent[3];
+    Vec3 plane;
+    double plane_norm;
+    double plane_l1l2;
+    Vec3 centroid;
 };
 EdgeFrame edge_frame(const Triangle& a);
 // The same bound from frames made by edge_frame(a) and edge_frame(b).
 double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                         const EdgeFrame& fb, double slack);
+// plane_lower_bound from the frames: the same value, bit for bit.
+double plane_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                         const EdgeFrame& fb, double slack);
 
 // The edge, plane and axis bounds in turn, stopping at the first whose
 // square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
