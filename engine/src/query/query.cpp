@@ -350,7 +350,7 @@ class SelfBests {
 // Intra-object query (seed §5.2.2): for every triangle, its closest triangle sharing no vertex.
 // With culling, one 2-ring neighbour per triangle seeds its bound (and its partner's), then the
 // culler's dual traversal proposes every pair that may still beat either triangle's bound (a pair
-// seen while seeding may be proposed again: cheaper than remembering it). Brute force tests every
+// a seed names is skipped there: it was tested while seeding). Brute force tests every
 // non-adjacent pair.
 // With the discrete-Voronoi culler, the kernel's partner of each triangle (Lemma 1: the
 // second-order governor of its best sample) replaces the 2-ring seed where it has one.
@@ -387,6 +387,15 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         std::atomic<std::uint64_t> tests{0};
         // Each triangle's edge-bound frame, once per query (filled below when culling).
         std::vector<EdgeFrame> frames;
+        // Each triangle's seed candidates (filled below when culling): its 2-ring (or Voronoi)
+        // seed, and on a warm frame its previous answer. Every pair they name is tested exactly
+        // while seeding, so the traversal skips it (testing it again gives the same value, and
+        // offering it again changes nothing).
+        std::vector<std::uint32_t> seed;
+        std::vector<std::uint32_t> warm;
+        auto named_by = [&](std::uint32_t u, std::uint32_t t) {
+            return !seed.empty() && (seed[u] == t || (!warm.empty() && warm[u] == t));
+        };
 
         // Exact test of one pair, skipped when a cheap lower bound shows it cannot beat (or tie)
         // either triangle's current best. A positive bound also proves the pair disjoint, which
@@ -428,7 +437,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // the traversal expensive), and a pair two triangles picked for each other is tested
             // once.
             std::vector<Vec3> centroid(nt);
-            std::vector<std::uint32_t> seed(nt, UINT32_MAX);
+            seed.assign(nt, UINT32_MAX);
             frames.resize(nt);
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
@@ -461,7 +470,6 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // bounds before any node threshold is computed. Both candidates are tested (after a
             // large move the old answer can be far worse than the 2-ring's), so a warm bound is
             // never looser than a cold one.
-            std::vector<std::uint32_t> warm;
             if (a < hints.size() && hints[a] != nullptr && hints[a]->size() == nt) {
                 warm.assign(nt, UINT32_MAX);
                 const auto& hint = *hints[a];
@@ -479,9 +487,6 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 }
             }
             // A pair {t, u} (u < t) that u's own candidates name is tested from u's side only.
-            auto named_by = [&](std::uint32_t u, std::uint32_t t) {
-                return seed[u] == t || (!warm.empty() && warm[u] == t);
-            };
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto&
                                                                                      range) {
                 if (work.should_stop()) {
@@ -512,7 +517,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 return work.stopped.load(std::memory_order_relaxed) ? -1.0 : bests.bound(t);
             },
             [&](std::uint32_t t, std::uint32_t u) {
-                if (work.stopped.load(std::memory_order_relaxed)) {
+                if (work.stopped.load(std::memory_order_relaxed) || named_by(t, u) ||
+                    named_by(u, t)) {
                     return;
                 }
                 std::uint64_t count = 0;
