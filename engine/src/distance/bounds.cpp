@@ -7,14 +7,6 @@ namespace proxima {
 
 namespace {
 
-// p's plane, as one_side uses it: the unnormalised normal n, |n| (0: not trusted) and the
-// product of p's two edge lengths from p[0] (for the error term).
-struct PlaneFrame {
-    Vec3 n;
-    double nn;
-    double l1l2;
-};
-
 PlaneFrame plane_frame(const Triangle& p) {
     const Vec3 e1 = p[1] - p[0];
     const Vec3 e2 = p[2] - p[0];
@@ -110,12 +102,9 @@ EdgeFrame edge_frame(const Triangle& a) {
     // of the in-plane directions and of their normalisation costs nothing; a's own extent along
     // each is taken from all three corners, not assumed zero at the edge.
     EdgeFrame f;
-    const PlaneFrame plane = plane_frame(a);
-    f.plane = plane.n;
-    f.plane_norm = plane.nn;
-    f.plane_l1l2 = plane.l1l2;
+    f.plane = plane_frame(a);
     f.centroid = centroid_of(a);
-    const Vec3& n = plane.n;
+    const Vec3& n = f.plane.n;
     for (int i = 0; i < 3; ++i) {
         const Vec3& p = a[i];
         const Vec3& q = a[i == 2 ? 0 : i + 1];
@@ -227,9 +216,7 @@ double plane_lower_bound(const Triangle& a, const Triangle& b, double slack) {
 
 double plane_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                          const EdgeFrame& fb, double slack) {
-    const double lb = std::max(one_side(a, {fa.plane, fa.plane_norm, fa.plane_l1l2}, b),
-                               one_side(b, {fb.plane, fb.plane_norm, fb.plane_l1l2}, a)) -
-                      slack;
+    const double lb = std::max(one_side(a, fa.plane, b), one_side(b, fb.plane, a)) - slack;
     return lb > 0.0 ? lb : 0.0;
 }
 

@@ -436,34 +436,32 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // whole 2-ring (not only larger indices: a triangle left without a bound is what makes
             // the traversal expensive), and a pair two triangles picked for each other is tested
             // once.
-            std::vector<Vec3> centroid(nt);
             seed.assign(nt, UINT32_MAX);
             frames.resize(nt);
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
                                   for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
                                       const Triangle x = corners(obj, t);
-                                      centroid[t] = (x[0] + x[1] + x[2]) / 3.0;
                                       frames[t] = edge_frame(x);
                                   }
                               });
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
-                              [&](const auto& range) {
-                                  for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                                      if (!partner.empty() && partner[t] != UINT32_MAX) {
-                                          seed[t] = partner[t];
-                                          continue;
-                                      }
-                                      double nearest = std::numeric_limits<double>::infinity();
-                                      for (auto u : topo.cached_two_ring(t)) {
-                                          const double d = squared_norm(centroid[u] - centroid[t]);
-                                          if (d < nearest) {
-                                              nearest = d;
-                                              seed[t] = u;
-                                          }
-                                      }
-                                  }
-                              });
+            tbb::parallel_for(
+                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
+                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                        if (!partner.empty() && partner[t] != UINT32_MAX) {
+                            seed[t] = partner[t];
+                            continue;
+                        }
+                        double nearest = std::numeric_limits<double>::infinity();
+                        for (auto u : topo.cached_two_ring(t)) {
+                            const double d = squared_norm(frames[u].centroid - frames[t].centroid);
+                            if (d < nearest) {
+                                nearest = d;
+                                seed[t] = u;
+                            }
+                        }
+                    }
+                });
             // Warm frame: also the previous answer's triangle, where it is still a valid partner
             // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
             // the last positions, so under coherent motion it still is or nearly is: near-final

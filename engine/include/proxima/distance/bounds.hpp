@@ -67,18 +67,23 @@ double axis_lower_bound(const Triangle& a, const Triangle& b, double slack);
 // of a triangle between them. Never above the computed distance by more than its rounding slack.
 double edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
+// A triangle's plane as the plane bound uses it: the unnormalised normal n, |n| (0 where the plane
+// is not trusted: a sliver) and the product of the lengths of the edges from the first corner
+// (for the error term).
+struct PlaneFrame {
+    Vec3 n;
+    double nn;
+    double l1l2;
+};
+
 // What the edge, plane and axis bounds need of one triangle alone, so that a search can compute it
 // once per triangle rather than once per pair: each edge's unit in-plane normal (away from the
-// third corner) and the triangle's extent beyond the edge along it (0 up to rounding); the
-// (unnormalised) plane normal, its length (0 where the plane is not trusted: a sliver) and the
-// product of the lengths of the edges from the first corner (the plane bound's error term); the
-// centroid (the axis bound's).
+// third corner) and the triangle's extent beyond the edge along it (0 up to rounding); its plane;
+// its centroid (the axis bound's, (a + b + c) / 3).
 struct EdgeFrame {
     Vec3 normal[3];
     double extent[3];
-    Vec3 plane;
-    double plane_norm;
-    double plane_l1l2;
+    PlaneFrame plane;
     Vec3 centroid;
 };
 EdgeFrame edge_frame(const Triangle& a);
