@@ -29,6 +29,9 @@ double center_gap(const Aabb& a, const Aabb& b) {
     return squared_norm(a.center() - b.center());
 }
 
+// The self traversal's leaf: a subtree of at most this many triangles (see self_pairs).
+constexpr std::uint32_t SELF_LEAF = 8;
+
 double node_size(const Bvh::Node& n) {
     const Vec3 e = n.box.extent();
     return e.x + e.y + e.z;
@@ -278,42 +281,77 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
                 }
             });
     }
-    // Largest bound per subtree, bottom-up (children have larger indices than their parent).
+    // The traversal below reads thresholds for every triangle of every leaf pair it opens (about
+    // 80 per triangle on the real frames): traversal_threshold_sq needs no square root, and a
+    // larger threshold only proposes more pairs (the visitor applies the exact one), never fewer.
+    auto reach = [&](double bound) { return traversal_threshold_sq(bound, slack); };
+    // The triangles in slot order, with what the leaf loop reads of each (box, corners' vertex
+    // ids): one contiguous run per leaf instead of three lookups through order().
+    struct Slot {
+        Aabb box;
+        TriangleIndices v;
+        std::uint32_t id;
+    };
+    std::vector<Slot> slots(order.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
+                      [&](const auto& range) {
+                          for (auto s = range.begin(); s != range.end(); ++s) {
+                              const auto t = order[s];
+                              slots[s] = {boxes[t], tris[t], t};
+                          }
+                      });
+    // Each node's run of slots (a subtree's triangles are contiguous in order()), bottom-up
+    // (children have larger indices than their parent), and its largest bound.
+    // The traversal treats a subtree of at most SELF_LEAF triangles as one leaf: measured on the
+    // real frames, a leaf pair costs less than the node pairs that would split it.
+    std::vector<std::uint32_t> run_first(nodes.size());
+    std::vector<std::uint32_t> run_count(nodes.size());
     std::vector<double> node_threshold(nodes.size());
     for (auto i = nodes.size(); i-- > 0;) {
         const auto& n = nodes[i];
-        double m = 0.0;
         if (n.leaf()) {
+            double m = 0.0;
             for (auto k = n.first; k < n.first + n.count; ++k) {
                 m = std::max(m, bound_sq(order[k]));
             }
-            node_threshold[i] = cull_threshold_sq(m, slack);
+            node_threshold[i] = reach(m);
+            run_first[i] = n.first;
+            run_count[i] = n.count;
         } else {
             node_threshold[i] = std::max(node_threshold[i + 1], node_threshold[n.first]);
+            run_first[i] = std::min(run_first[i + 1], run_first[n.first]);
+            run_count[i] = run_count[i + 1] + run_count[n.first];
         }
     }
-    auto leaves = [&](const Bvh::Node& x, const Bvh::Node& y, bool same_node) {
-        double ty[Bvh::LEAF_SIZE];
+    auto leaf = [&](std::uint32_t i) { return run_count[i] <= SELF_LEAF; };
+    auto leaves = [&](std::uint32_t i, std::uint32_t j) {
+        const bool same_node = i == j;
+        const Slot* sx = &slots[run_first[i]];
+        const Slot* sy = &slots[run_first[j]];
+        const std::uint32_t nx = run_count[i];
+        const std::uint32_t ny = run_count[j];
+        const Aabb& ybox = nodes[j].box;
+        double ty[SELF_LEAF];
         double ty_max = 0.0;
-        for (std::uint32_t q = 0; q < y.count; ++q) {
-            ty[q] = threshold_of(order[y.first + q]);
+        for (std::uint32_t q = 0; q < ny; ++q) {
+            ty[q] = reach(bound_sq(sy[q].id));
             ty_max = std::max(ty_max, ty[q]);
         }
-        for (std::uint32_t p = 0; p < x.count; ++p) {
-            const auto t = order[x.first + p];
-            const double tt = same_node ? ty[p] : threshold_of(t);
+        for (std::uint32_t p = 0; p < nx; ++p) {
+            const Slot& st = sx[p];
+            const double tt = same_node ? ty[p] : reach(bound_sq(st.id));
             // The leaf's box holds each of its triangles' boxes, so a triangle that the leaf's
             // box already culls against every threshold involved is culled against each triangle.
-            if (!same_node && box_squared_distance(boxes[t], y.box) >= std::max(tt, ty_max)) {
+            if (!same_node && box_squared_distance(st.box, ybox) >= std::max(tt, ty_max)) {
                 continue;
             }
-            for (std::uint32_t q = same_node ? p + 1 : 0; q < y.count; ++q) {
-                const auto u = order[y.first + q];
-                if (share_vertex(tris[t], tris[u])) {
+            for (std::uint32_t q = same_node ? p + 1 : 0; q < ny; ++q) {
+                const Slot& su = sy[q];
+                if (share_vertex(st.v, su.v)) {
                     continue;
                 }
-                if (box_squared_distance(boxes[t], boxes[u]) < std::max(tt, ty[q])) {
-                    visit(std::min(t, u), std::max(t, u));
+                if (box_squared_distance(st.box, su.box) < std::max(tt, ty[q])) {
+                    visit(std::min(st.id, su.id), std::max(st.id, su.id));
                 }
             }
         }
@@ -322,12 +360,42 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         return box_squared_distance(nodes[i].box, nodes[j].box) <
                std::max(node_threshold[i], node_threshold[j]);
     };
-    parallel_dual_traversal(
-        512,
-        [&](NodePair pair, std::vector<NodePair>& next, std::size_t) {
-            dual_step(bvh, bvh, true, pair, next, leaves, near);
-        },
-        [](std::size_t) {});
+    // dual_step's expansion with the leaves above: (X, X) gives (L, L), (R, R) and (L, R), so
+    // each unordered node pair is met once; otherwise the larger node is split.
+    auto step = [&](NodePair pair, std::vector<NodePair>& next, std::size_t) {
+        const auto [i, j] = pair;
+        const auto& x = nodes[i];
+        const auto& y = nodes[j];
+        auto push = [&](std::uint32_t p, std::uint32_t q) {
+            if (near(p, q)) {
+                next.emplace_back(p, q);
+            }
+        };
+        const bool lx = leaf(i);
+        const bool ly = leaf(j);
+        if (i == j) {
+            if (lx) {
+                leaves(i, i);
+                return;
+            }
+            next.emplace_back(i + 1, i + 1);
+            next.emplace_back(x.first, x.first);
+            push(i + 1, x.first);
+            return;
+        }
+        if (lx && ly) {
+            leaves(i, j);
+            return;
+        }
+        if (!lx && (ly || node_size(x) >= node_size(y))) {
+            push(i + 1, j);
+            push(x.first, j);
+        } else {
+            push(i, j + 1);
+            push(i, y.first);
+        }
+    };
+    parallel_dual_traversal(512, step, [](std::size_t) {});
 }
 
 // Every triangle pair whose boxes come within the radius (widened by the rounding slack); for one

@@ -306,15 +306,25 @@ Status run_separation(const Scene& scene, Culler& culler, const SweepAndPrune& s
 // then smaller triangle index), so the answer does not depend on scheduling.
 class SelfBests {
   public:
-    explicit SelfBests(std::vector<SelfDistance>& out)
+    SelfBests(std::vector<SelfDistance>& out, double slack)
         : m_out(out),
+          m_slack(slack),
           m_bound(out.size()),
+          m_threshold(out.size()),
           m_exact(out.size(), std::numeric_limits<double>::infinity()) {
         for (auto& b : m_bound) {
             b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
         }
+        for (auto& b : m_threshold) {
+            b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
+        }
     }
     double bound(std::uint32_t t) const { return m_bound[t].load(std::memory_order_relaxed); }
+    // cull_threshold_sq of the bound, kept beside it (a square root per improvement, not per
+    // candidate pair). Read without the lock it may be an earlier bound's: larger, so still valid.
+    double threshold(std::uint32_t t) const {
+        return m_threshold[t].load(std::memory_order_relaxed);
+    }
 
     void offer(std::uint32_t t, std::uint32_t u, double d_sq, const Vec3& p, const Vec3& q) {
         if (d_sq > bound(t)) {
@@ -329,6 +339,7 @@ class SelfBests {
             best.point = p;
             best.other_point = q;
             m_bound[t].store(d_sq, std::memory_order_relaxed);
+            m_threshold[t].store(cull_threshold_sq(d_sq, m_slack), std::memory_order_relaxed);
         }
     }
 
@@ -342,7 +353,9 @@ class SelfBests {
 
   private:
     std::vector<SelfDistance>& m_out;
+    double m_slack;
     std::vector<std::atomic<double>> m_bound;
+    std::vector<std::atomic<double>> m_threshold;
     std::vector<double> m_exact;
     std::array<std::mutex, 256> m_locks;
 };
@@ -383,8 +396,16 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         const MeshTopology& topo = *obj.topology;
         const auto nt = static_cast<std::uint32_t>(obj.triangle_count());
         const double slack = rounding_slack(coordinate_scale(obj.box));
-        SelfBests bests(result.self[a]);
+        SelfBests bests(result.self[a], slack);
         std::atomic<std::uint64_t> tests{0};
+        // Each triangle's corners, gathered once per query: a candidate pair reads two runs of
+        // 72 bytes instead of six vertex lookups through the topology.
+        std::vector<Triangle> tri(nt);
+        tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 4096), [&](const auto& range) {
+            for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                tri[t] = corners(obj, t);
+            }
+        });
         // Each triangle's edge-bound frame, once per query (filled below when culling).
         std::vector<EdgeFrame> frames;
         // Each triangle's seed candidates (filled below when culling): its 2-ring (or Voronoi)
@@ -402,20 +423,17 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         // spares the exact test its intersection search (same result, bit for bit).
         // The distance is computed with the smaller index first, as brute force does, so the
         // value is bit-identical whichever way a seed or a traversal proposes the pair.
-        auto test = [&](std::uint32_t t, std::uint32_t u, const Triangle& tx,
-                        std::uint64_t& count) {
-            const Triangle other = corners(obj, u);
-            const bool swapped = t > u;
-            const Triangle& x = swapped ? other : tx;
-            const Triangle& y = swapped ? tx : other;
-            if (swapped) {
+        auto test = [&](std::uint32_t t, std::uint32_t u, std::uint64_t& count) {
+            if (t > u) {
                 std::swap(t, u);
             }
+            const Triangle& x = tri[t];
+            const Triangle& y = tri[u];
             double lb = 0.0;
             if (cull) {
-                const double bound = std::max(bests.bound(t), bests.bound(u));
-                if (std::isfinite(bound)) {
-                    const double th = cull_threshold_sq(bound, slack);
+                // = cull_threshold_sq of the larger bound (the function is non-decreasing).
+                const double th = std::max(bests.threshold(t), bests.threshold(u));
+                if (std::isfinite(th)) {
                     lb = lower_bound_until(x, frames[t], y, frames[u], slack, th);
                     if (lb * lb >= th) {
                         return;
@@ -441,8 +459,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
                                   for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                                      const Triangle x = corners(obj, t);
-                                      frames[t] = edge_frame(x);
+                                      frames[t] = edge_frame(tri[t]);
                                   }
                               });
             tbb::parallel_for(
@@ -492,12 +509,11 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 }
                 std::uint64_t count = 0;
                 for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                    const Triangle x = corners(obj, t);
                     for (const std::uint32_t u : {seed[t], warm.empty() ? UINT32_MAX : warm[t]}) {
                         if (u == UINT32_MAX || (u < t && named_by(u, t))) {
                             continue;
                         }
-                        test(t, u, x, count);
+                        test(t, u, count);
                     }
                 }
                 tests += count;
@@ -520,7 +536,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                     return;
                 }
                 std::uint64_t count = 0;
-                test(t, u, corners(obj, t), count);
+                test(t, u, count);
                 if (count != 0) {
                     // One object is one long traversal: look at the token every 4096 tests.
                     const auto done = tests.fetch_add(count, std::memory_order_relaxed) + count;

@@ -3,7 +3,7 @@
 // slivers), tight where each is meant to be strong (parallel planes for the plane bound,
 // neighbours of one flat sheet for the axis bound, neighbours across a triangle between them for
 // the edge bound), zero for intersecting triangles; and the
-// threshold helpers the searches compare against.
+// threshold helpers the searches compare against (the traversal's never below the exact one).
 
 #include <gtest/gtest.h>
 
@@ -207,6 +207,33 @@ TEST(CullThresholds, WidenTheBestDistanceAndFollowALiveBound) {
     EXPECT_EQ(threshold.get(), cull_threshold_sq(9.0, 1e-9));
     live = 1.0;  // the search found a closer pair
     EXPECT_EQ(threshold.get(), cull_threshold_sq(1.0, 1e-9));
+}
+
+TEST(CullThresholds, TheTraversalThresholdIsNeverBelowTheExactOne) {
+    // Bounds from 0 over every magnitude a squared distance takes (with the slacks of coordinate
+    // scales from 1e-6 to 1e9), and the values where the square-root term dominates: b of the
+    // order of the slack's square.
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> mantissa(1.0, 2.0);
+    std::uniform_int_distribution<int> exponent(-300, 300);
+    std::uniform_int_distribution<int> scale_exponent(-6, 9);
+    for (int k = 0; k < 200000; ++k) {
+        const double slack = rounding_slack(std::ldexp(mantissa(rng), scale_exponent(rng) * 3));
+        double b = std::ldexp(mantissa(rng), exponent(rng));
+        if (k % 4 == 0) {
+            b = slack * slack * std::ldexp(mantissa(rng), exponent(rng) % 40);
+        } else if (k % 97 == 0) {
+            b = 0.0;
+        }
+        ASSERT_GE(traversal_threshold_sq(b, slack), cull_threshold_sq(b, slack))
+            << "bound " << b << " slack " << slack;
+    }
+    EXPECT_EQ(traversal_threshold_sq(std::numeric_limits<double>::infinity(), 1e-12),
+              std::numeric_limits<double>::infinity());
+    // A stopped search reads a negative bound: every box distance must then reach it.
+    EXPECT_LT(traversal_threshold_sq(-1.0, 1e-6), 0.0);
+    // Not much larger: a few parts per billion of the bound.
+    EXPECT_LT(traversal_threshold_sq(4.0, 1e-12), 4.0 * (1.0 + 1e-8));
 }
 
 TEST(CullThresholds, SlackGrowsWithTheCoordinatesMagnitude) {

@@ -16,7 +16,8 @@ class Bvh {
   public:
     // Nodes are stored in depth-first pre-order: a node's left child is the next node and its
     // right child is `right`; children always have larger indices than their parent, so a reverse
-    // sweep refits bottom-up. A leaf (count > 0) holds triangles order()[first, first + count).
+    // sweep refits bottom-up. A leaf (count > 0) holds triangles order()[first, first + count),
+    // and every node's subtree holds one contiguous run of order() (the left child's run first).
     struct Node {
         Aabb box;
         std::uint32_t first = 0;  // leaf: first slot in order(); inner: index of the right child

@@ -21,6 +21,15 @@ inline double cull_threshold_sq(double best_sq, double slack) {
     return b * b;
 }
 
+// A threshold at least cull_threshold_sq(best_sq, slack) for every best_sq >= 0 (and below 0
+// for a negative one), without its square root: 2 sqrt(b) s <= 1e-9 b + 1e9 s^2 (AM-GM), so the
+// exact threshold is at most b (1 + 3e-9) + (1e9 + 3) s^2, well inside the margins here for the
+// rounding of both. For a traversal that reads thresholds far more often than bounds change: it
+// may propose a few more pairs than cull_threshold_sq would, never fewer.
+inline double traversal_threshold_sq(double best_sq, double slack) {
+    return best_sq * (1.0 + 4e-9) + 2e9 * slack * slack;
+}
+
 // The cull threshold of a bound that a search may lower as it goes (a reference to the live
 // bound), recomputed only when the bound changed: a square root per improvement, not per test.
 class CullThreshold {
