@@ -69,6 +69,14 @@ TEST(TriangleLowerBounds, NeverAboveTheComputedDistance) {
                 const double below = lb * lb * (1.0 - 1e-12);
                 const double reached = lower_bound_until(a, b, slack, below);
                 ASSERT_GE(reached * reached, below);
+                // A low threshold stops it early (after one triangle's edges, say): still a
+                // bound.
+                for (const double low : {below * 1e-4, below * 0.25}) {
+                    const double early = lower_bound_until(a, b, slack, low);
+                    ASSERT_GE(early * early, low);
+                    ASSERT_LE(early, exact) << "scale " << scale << " pair " << i;
+                }
+                ASSERT_LE(reached, exact);
                 // A positive bound proves the pair disjoint: the exact test told so gives the
                 // same answer, bit for bit.
                 const auto full = triangle_triangle(a, b);
