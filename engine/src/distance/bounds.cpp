@@ -195,11 +195,11 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // bound 0.3-5 % more. Its first side (a's edges) alone, when it already reaches the
     // threshold, spares the second.
     // The same value as edge_lower_bound(a, fa, b, fb, slack) when both sides are needed.
-    constexpr double err = 64.0 * std::numeric_limits<double>::epsilon();
+    constexpr double ERR = 64.0 * std::numeric_limits<double>::epsilon();
     const double ab = edge_side(a, fa, b);
     const double reach_a = ab > 0.0 ? reach_from(a[0], a, b) : 0.0;
     if (ab > 0.0) {
-        const double lb_a = ab - err * reach_a - slack;
+        const double lb_a = ab - ERR * reach_a - slack;
         if (lb_a > 0.0 && lb_a * lb_a >= threshold_sq) {
             return lb_a;
         }
@@ -208,7 +208,7 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     double lb = 0.0;
     if (std::max(ab, ba) > 0.0) {
         const double reach = ab >= ba ? reach_a : reach_from(b[0], b, a);
-        lb = std::max(0.0, std::max(ab, ba) - err * reach - slack);
+        lb = std::max(0.0, std::max(ab, ba) - ERR * reach - slack);
     }
     if (lb * lb >= threshold_sq) {
         return lb;
