@@ -2,6 +2,7 @@
 // culled by box distance against the current best widened by the rounding slack, so rounding in
 // the box arithmetic can never drop a pair whose computed distance would be the answer.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <unordered_map>
 
@@ -9,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include "culling/cullers.hpp"
+#include "proxima/culling/leaf_rows.hpp"
 #include "proxima/distance/bounds.hpp"
 
 namespace proxima::detail {
@@ -293,11 +295,15 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         std::uint32_t id;
     };
     std::vector<Slot> slots(order.size());
+    // The same boxes and vertex ids as structure of arrays, for the leaf rows (leaf_row).
+    LeafSlots rows;
+    rows.resize(order.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
                       [&](const auto& range) {
                           for (auto s = range.begin(); s != range.end(); ++s) {
                               const auto t = order[s];
                               slots[s] = {boxes[t], tris[t], t};
+                              rows.set(s, boxes[t], tris[t]);
                           }
                       });
     // Each node's run of slots (a subtree's triangles are contiguous in order()), bottom-up
@@ -345,14 +351,20 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
             if (!same_node && box_squared_distance(st.box, ybox) >= std::max(tt, ty_max)) {
                 continue;
             }
-            for (std::uint32_t q = same_node ? p + 1 : 0; q < ny; ++q) {
-                const Slot& su = sy[q];
-                if (share_vertex(st.v, su.v)) {
-                    continue;
-                }
-                if (box_squared_distance(st.box, su.box) < std::max(tt, ty[q])) {
-                    visit(std::min(st.id, su.id), std::max(st.id, su.id));
-                }
+            // The row's non-adjacent triangles whose boxes come within the larger threshold.
+            const std::uint32_t q0 = same_node ? p + 1 : 0;
+            if (q0 >= ny) {
+                continue;
+            }
+            double threshold[SELF_LEAF] = {};
+            for (std::uint32_t q = q0; q < ny; ++q) {
+                threshold[q - q0] = std::max(tt, ty[q]);
+            }
+            for (unsigned pass =
+                     leaf_row(rows, run_first[j] + q0, ny - q0, st.box, st.v, threshold);
+                 pass != 0; pass &= pass - 1) {
+                const Slot& su = sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
+                visit(std::min(st.id, su.id), std::max(st.id, su.id));
             }
         }
     };

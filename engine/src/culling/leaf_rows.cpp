@@ -1,0 +1,122 @@
+// The self traversal's leaf rows: see proxima/culling/leaf_rows.hpp.
+#include "proxima/culling/leaf_rows.hpp"
+
+#include <algorithm>
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define PROXIMA_LEAF_ROWS_AVX2 1
+#endif
+
+namespace proxima::detail {
+
+void LeafSlots::resize(std::size_t n) {
+    for (auto* a : {&lox, &loy, &loz, &hix, &hiy, &hiz}) {
+        a->assign(n + PAD, 0.0);
+    }
+    for (auto* a : {&v0, &v1, &v2}) {
+        a->assign(n + PAD, 0U);
+    }
+}
+
+unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                           const Aabb& box, const TriangleIndices& v, const double* threshold_sq) {
+    unsigned pass = 0;
+    for (std::uint32_t q = 0; q < n; ++q) {
+        const std::uint32_t k = first + q;
+        if (v[0] == slots.v0[k] || v[0] == slots.v1[k] || v[0] == slots.v2[k] ||
+            v[1] == slots.v0[k] || v[1] == slots.v1[k] || v[1] == slots.v2[k] ||
+            v[2] == slots.v0[k] || v[2] == slots.v1[k] || v[2] == slots.v2[k]) {
+            continue;
+        }
+        // box_squared_distance(box, slot k's box), the same operations in the same order.
+        const double gx = std::max(std::max(0.0, box.lo.x - slots.hix[k]), slots.lox[k] - box.hi.x);
+        const double gy = std::max(std::max(0.0, box.lo.y - slots.hiy[k]), slots.loy[k] - box.hi.y);
+        const double gz = std::max(std::max(0.0, box.lo.z - slots.hiz[k]), slots.loz[k] - box.hi.z);
+        double d = 0.0;
+        d += gx * gx;
+        d += gy * gy;
+        d += gz * gz;
+        if (d < threshold_sq[q]) {
+            pass |= 1U << q;
+        }
+    }
+    return pass;
+}
+
+#ifdef PROXIMA_LEAF_ROWS_AVX2
+namespace {
+
+__attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
+                                                       std::uint32_t n, const Aabb& box,
+                                                       const TriangleIndices& v,
+                                                       const double* threshold_sq) {
+    unsigned pass = 0;
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d tlx = _mm256_set1_pd(box.lo.x);
+    const __m256d tly = _mm256_set1_pd(box.lo.y);
+    const __m256d tlz = _mm256_set1_pd(box.lo.z);
+    const __m256d thx = _mm256_set1_pd(box.hi.x);
+    const __m256d thy = _mm256_set1_pd(box.hi.y);
+    const __m256d thz = _mm256_set1_pd(box.hi.z);
+    const __m128i a0 = _mm_set1_epi32(static_cast<int>(v[0]));
+    const __m128i a1 = _mm_set1_epi32(static_cast<int>(v[1]));
+    const __m128i a2 = _mm_set1_epi32(static_cast<int>(v[2]));
+    for (std::uint32_t q = 0; q < n; q += 4) {
+        const std::uint32_t k = first + q;
+        // max(max(0, box.lo - hi), lo - box.hi) per axis, then ((0 + gx²) + gy²) + gz²: as the
+        // portable copy.
+        const __m256d gx =
+            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tlx, _mm256_loadu_pd(&slots.hix[k]))),
+                          _mm256_sub_pd(_mm256_loadu_pd(&slots.lox[k]), thx));
+        const __m256d gy =
+            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tly, _mm256_loadu_pd(&slots.hiy[k]))),
+                          _mm256_sub_pd(_mm256_loadu_pd(&slots.loy[k]), thy));
+        const __m256d gz =
+            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tlz, _mm256_loadu_pd(&slots.hiz[k]))),
+                          _mm256_sub_pd(_mm256_loadu_pd(&slots.loz[k]), thz));
+        __m256d d = _mm256_add_pd(zero, _mm256_mul_pd(gx, gx));
+        d = _mm256_add_pd(d, _mm256_mul_pd(gy, gy));
+        d = _mm256_add_pd(d, _mm256_mul_pd(gz, gz));
+        const auto close = static_cast<unsigned>(
+            _mm256_movemask_pd(_mm256_cmp_pd(d, _mm256_loadu_pd(threshold_sq + q), _CMP_LT_OQ)));
+        const __m128i b0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v0[k]));
+        const __m128i b1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v1[k]));
+        const __m128i b2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v2[k]));
+        __m128i shared = _mm_or_si128(_mm_cmpeq_epi32(a0, b0), _mm_cmpeq_epi32(a0, b1));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a0, b2));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b0));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b1));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b2));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b0));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b1));
+        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b2));
+        const auto adjacent = static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(shared)));
+        pass |= (close & ~adjacent & 0xFU) << q;
+    }
+    return pass & ((1U << n) - 1U);
+}
+
+// Read once at start-up (a call before that, from another file's static initializer, would take
+// the portable copy: the same result).
+bool cpu_has_avx2() {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") != 0;
+}
+const bool HAS_AVX2 = cpu_has_avx2();
+
+}  // namespace
+
+unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
+                  const TriangleIndices& v, const double* threshold_sq) {
+    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
+                    : leaf_row_portable(slots, first, n, box, v, threshold_sq);
+}
+#else
+unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
+                  const TriangleIndices& v, const double* threshold_sq) {
+    return leaf_row_portable(slots, first, n, box, v, threshold_sq);
+}
+#endif
+
+}  // namespace proxima::detail
