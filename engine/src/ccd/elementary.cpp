@@ -82,6 +82,8 @@
 #include <limits>
 #include <vector>
 
+#include "cpu_features.hpp"
+
 namespace proxima::ccd {
 
 namespace {
@@ -796,22 +798,15 @@ ElementaryResult solve_portable(CcdKind kind, const CcdPoints& points,
     return solve_body(kind, points, options);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#ifdef PROXIMA_X86_64_DISPATCH
 __attribute__((target("avx2"))) ElementaryResult solve_avx2(CcdKind kind, const CcdPoints& points,
                                                             const ElementaryOptions& options) {
     return solve_body(kind, points, options);
 }
 
-// Read once at start-up (a call before that, from another file's static initializer, would
-// take the portable copy: the same answers).
-bool cpu_has_avx2() {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") != 0;
-}
-const bool HAS_AVX2 = cpu_has_avx2();
-
 ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
-    return HAS_AVX2 ? solve_avx2(kind, points, options) : solve_portable(kind, points, options);
+    return detail::cpu_has_avx2() ? solve_avx2(kind, points, options)
+                                  : solve_portable(kind, points, options);
 }
 #else
 ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
@@ -1070,7 +1065,7 @@ bool prefilter_portable(CcdKind kind, const CcdPoints& points, const ElementaryO
     return prefilter_body(kind, points, options);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#ifdef PROXIMA_X86_64_DISPATCH
 __attribute__((target("avx2"))) bool prefilter_avx2(CcdKind kind, const CcdPoints& points,
                                                     const ElementaryOptions& options) {
     return prefilter_body(kind, points, options);
@@ -1081,8 +1076,8 @@ __attribute__((target("avx2"))) bool prefilter_avx2(CcdKind kind, const CcdPoint
 
 bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
                                   const ElementaryOptions& options) {
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-    if (HAS_AVX2) {
+#ifdef PROXIMA_X86_64_DISPATCH
+    if (detail::cpu_has_avx2()) {
         return prefilter_avx2(kind, points, options);
     }
 #endif

@@ -3,9 +3,10 @@
 
 #include <algorithm>
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include "cpu_features.hpp"
+
+#ifdef PROXIMA_X86_64_DISPATCH
 #include <immintrin.h>
-#define PROXIMA_LEAF_ROWS_AVX2 1
 #endif
 
 namespace proxima::detail {
@@ -44,7 +45,7 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
     return pass;
 }
 
-#ifdef PROXIMA_LEAF_ROWS_AVX2
+#ifdef PROXIMA_X86_64_DISPATCH
 namespace {
 
 __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
@@ -97,20 +98,12 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
     return pass & ((1U << n) - 1U);
 }
 
-// Read once at start-up (a call before that, from another file's static initializer, would take
-// the portable copy: the same result).
-bool cpu_has_avx2() {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") != 0;
-}
-const bool HAS_AVX2 = cpu_has_avx2();
-
 }  // namespace
 
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
                   const TriangleIndices& v, const double* threshold_sq) {
-    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
-                    : leaf_row_portable(slots, first, n, box, v, threshold_sq);
+    return cpu_has_avx2() ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
+                          : leaf_row_portable(slots, first, n, box, v, threshold_sq);
 }
 #else
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
