@@ -164,23 +164,38 @@ double reach_from(const Vec3& origin, const Triangle& a, const Triangle& b) {
     return r;
 }
 
-}  // namespace
+// A gap along a direction of length 1 (edge_side) less its rounding and the slack, or 0. Same
+// error model as axis_lower_bound: differences and dot products relative to the extent involved
+// (`reach`, reach_from), and a direction of length 1 within a few ulps.
+double gap_bound(double gap, double reach, double slack) {
+    const double lb = gap - 64.0 * std::numeric_limits<double>::epsilon() * reach - slack;
+    return lb > 0.0 ? lb : 0.0;
+}
 
-double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
-                        const EdgeFrame& fb, double slack) {
-    // Where a's edge normals point away from b the gap is negative, so only edges facing b
-    // count; both triangles' edges are tried.
-    const double ab = edge_side(a, fa, b);
+// The edge bound from a's side `ab` (edge_side(a, fa, b)) and b's side: where a's edge normals
+// point away from b the gap is negative, so only edges facing b count; the larger gap, with its
+// own triangle's lever arm. `reach_a` is reach_from(a[0], a, b) when the caller has it, else < 0.
+double edge_bound_from(const Triangle& a, double ab, double reach_a, const Triangle& b,
+                       const EdgeFrame& fb, double slack) {
     const double ba = edge_side(b, fb, a);
     const double gap = std::max(ab, ba);
     if (!(gap > 0.0)) {
         return 0.0;
     }
-    const double reach = ab >= ba ? reach_from(a[0], a, b) : reach_from(b[0], b, a);
-    // Same error model as axis_lower_bound: differences and dot products relative to the
-    // extent involved, and a direction of length 1 within a few ulps.
-    const double lb = gap - 64.0 * std::numeric_limits<double>::epsilon() * reach - slack;
-    return lb > 0.0 ? lb : 0.0;
+    double reach = 0.0;
+    if (ab >= ba) {
+        reach = reach_a >= 0.0 ? reach_a : reach_from(a[0], a, b);
+    } else {
+        reach = reach_from(b[0], b, a);
+    }
+    return gap_bound(gap, reach, slack);
+}
+
+}  // namespace
+
+double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                        const EdgeFrame& fb, double slack) {
+    return edge_bound_from(a, edge_side(a, fa, b), -1.0, b, fb, slack);
 }
 
 double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
@@ -193,23 +208,16 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // per-triangle frames the edge bound is the cheapest and alone prunes 44-68 % of the self
     // search's candidates on cloth-ball and rod-twist; the plane bound most of the rest, the axis
     // bound 0.3-5 % more. Its first side (a's edges) alone, when it already reaches the
-    // threshold, spares the second.
-    // The same value as edge_lower_bound(a, fa, b, fb, slack) when both sides are needed.
-    constexpr double ERR = 64.0 * std::numeric_limits<double>::epsilon();
+    // threshold, spares the second; otherwise the value is edge_lower_bound(a, fa, b, fb, slack).
     const double ab = edge_side(a, fa, b);
-    const double reach_a = ab > 0.0 ? reach_from(a[0], a, b) : 0.0;
+    const double reach_a = ab > 0.0 ? reach_from(a[0], a, b) : -1.0;
     if (ab > 0.0) {
-        const double lb_a = ab - ERR * reach_a - slack;
+        const double lb_a = gap_bound(ab, reach_a, slack);
         if (lb_a > 0.0 && lb_a * lb_a >= threshold_sq) {
             return lb_a;
         }
     }
-    const double ba = edge_side(b, fb, a);
-    double lb = 0.0;
-    if (std::max(ab, ba) > 0.0) {
-        const double reach = ab >= ba ? reach_a : reach_from(b[0], b, a);
-        lb = std::max(0.0, std::max(ab, ba) - ERR * reach - slack);
-    }
+    double lb = edge_bound_from(a, ab, reach_a, b, fb, slack);
     if (lb * lb >= threshold_sq) {
         return lb;
     }
