@@ -288,14 +288,21 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     // larger threshold only proposes more pairs (the visitor applies the exact one), never fewer.
     auto reach = [&](double bound) { return traversal_threshold_sq(bound, slack); };
     // The triangles in slot order, with what the leaf loop reads of each (box, corners' vertex
-    // ids) as structure of arrays: one contiguous run per leaf instead of lookups through
-    // order(), and four slots at a time for the leaf rows (leaf_row).
+    // ids): one contiguous run per leaf instead of three lookups through order().
+    struct Slot {
+        Aabb box;
+        TriangleIndices v;
+        std::uint32_t id;
+    };
+    std::vector<Slot> slots(order.size());
+    // The same boxes and vertex ids as structure of arrays, for the leaf rows (leaf_row).
     LeafSlots rows;
     rows.resize(order.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
                       [&](const auto& range) {
                           for (auto s = range.begin(); s != range.end(); ++s) {
                               const auto t = order[s];
+                              slots[s] = {boxes[t], tris[t], t};
                               rows.set(s, boxes[t], tris[t]);
                           }
                       });
@@ -325,26 +332,23 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     auto leaf = [&](std::uint32_t i) { return run_count[i] <= SELF_LEAF; };
     auto leaves = [&](std::uint32_t i, std::uint32_t j) {
         const bool same_node = i == j;
-        const std::uint32_t fx = run_first[i];
-        const std::uint32_t fy = run_first[j];
-        const std::uint32_t* idx = &order[fx];
-        const std::uint32_t* idy = &order[fy];
+        const Slot* sx = &slots[run_first[i]];
+        const Slot* sy = &slots[run_first[j]];
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
         const Aabb& ybox = nodes[j].box;
         double ty[SELF_LEAF];
         double ty_max = 0.0;
         for (std::uint32_t q = 0; q < ny; ++q) {
-            ty[q] = reach(bound_sq(idy[q]));
+            ty[q] = reach(bound_sq(sy[q].id));
             ty_max = std::max(ty_max, ty[q]);
         }
         for (std::uint32_t p = 0; p < nx; ++p) {
-            const std::uint32_t t = idx[p];
-            const Aabb tbox = rows.box(fx + p);
-            const double tt = same_node ? ty[p] : reach(bound_sq(t));
+            const Slot& st = sx[p];
+            const double tt = same_node ? ty[p] : reach(bound_sq(st.id));
             // The leaf's box holds each of its triangles' boxes, so a triangle that the leaf's
             // box already culls against every threshold involved is culled against each triangle.
-            if (!same_node && box_squared_distance(tbox, ybox) >= std::max(tt, ty_max)) {
+            if (!same_node && box_squared_distance(st.box, ybox) >= std::max(tt, ty_max)) {
                 continue;
             }
             // The row's non-adjacent triangles whose boxes come within the larger threshold.
@@ -357,11 +361,10 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
                 threshold[q - q0] = std::max(tt, ty[q]);
             }
             for (unsigned pass =
-                     leaf_row(rows, fy + q0, ny - q0, tbox, rows.vertices(fx + p), threshold);
+                     leaf_row(rows, run_first[j] + q0, ny - q0, st.box, st.v, threshold);
                  pass != 0; pass &= pass - 1) {
-                const std::uint32_t u =
-                    idy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
-                visit(std::min(t, u), std::max(t, u));
+                const Slot& su = sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
+                visit(std::min(st.id, su.id), std::max(st.id, su.id));
             }
         }
     };

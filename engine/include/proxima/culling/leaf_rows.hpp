@@ -34,8 +34,6 @@ struct LeafSlots {
         v1[k] = v[1];
         v2[k] = v[2];
     }
-    Aabb box(std::size_t k) const { return {{lox[k], loy[k], loz[k]}, {hix[k], hiy[k], hiz[k]}}; }
-    TriangleIndices vertices(std::size_t k) const { return {v0[k], v1[k], v2[k]}; }
 };
 
 // Bit q (q < n <= 8) is set when slot first + q shares no vertex with `v` and
