@@ -98,12 +98,16 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
     return pass & ((1U << n) - 1U);
 }
 
+// Read once at start-up (leaf_row runs about a million times a query; a call before this, from
+// another file's static initializer, would take the portable copy: the same result).
+const bool HAS_AVX2 = cpu_has_avx2();
+
 }  // namespace
 
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
                   const TriangleIndices& v, const double* threshold_sq) {
-    return cpu_has_avx2() ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
-                          : leaf_row_portable(slots, first, n, box, v, threshold_sq);
+    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
+                    : leaf_row_portable(slots, first, n, box, v, threshold_sq);
 }
 #else
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
