@@ -804,9 +804,12 @@ __attribute__((target("avx2"))) ElementaryResult solve_avx2(CcdKind kind, const 
     return solve_body(kind, points, options);
 }
 
+// Read once at start-up (the prefilter runs per candidate; a call before this, from another
+// file's static initializer, would take the portable copy: the same answers).
+const bool HAS_AVX2 = detail::cpu_has_avx2();
+
 ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
-    return detail::cpu_has_avx2() ? solve_avx2(kind, points, options)
-                                  : solve_portable(kind, points, options);
+    return HAS_AVX2 ? solve_avx2(kind, points, options) : solve_portable(kind, points, options);
 }
 #else
 ElementaryResult solve(CcdKind kind, const CcdPoints& points, const ElementaryOptions& options) {
@@ -1077,7 +1080,7 @@ __attribute__((target("avx2"))) bool prefilter_avx2(CcdKind kind, const CcdPoint
 bool elementary_prefilter_rejects(CcdKind kind, const CcdPoints& points,
                                   const ElementaryOptions& options) {
 #ifdef PROXIMA_X86_64_DISPATCH
-    if (detail::cpu_has_avx2()) {
+    if (HAS_AVX2) {
         return prefilter_avx2(kind, points, options);
     }
 #endif
