@@ -482,7 +482,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // Warm frame: also the previous answer's triangle, where it is still a valid partner
             // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
             // the last positions, so under coherent motion it still is or nearly is: near-final
-            // bounds before any node threshold is computed. Both candidates are tested (after a
+            // bounds before any node threshold is computed. Both candidates are offered (after a
             // large move the old answer can be far worse than the 2-ring's), so a warm bound is
             // never looser than a cold one.
             if (a < hints.size() && hints[a] != nullptr && hints[a]->size() == nt) {
@@ -490,33 +490,38 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 const auto& hint = *hints[a];
                 for (std::uint32_t t = 0; t < nt; ++t) {
                     const std::uint32_t u = hint[t];
-                    if (u >= nt || u == seed[t] || topo.adjacent(t, u)) {
-                        continue;
-                    }
-                    // Within the 2-ring the nearest-centroid seed is as good a start; the
-                    // remembered triangle pays where it lies beyond (folds, contacts).
-                    const auto ring = topo.cached_two_ring(t);
-                    if (std::find(ring.begin(), ring.end(), u) == ring.end()) {
+                    if (u < nt && u != t && !topo.adjacent(t, u)) {
                         warm[t] = u;
                     }
                 }
             }
-            // A pair {t, u} (u < t) that u's own candidates name is tested from u's side only.
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto&
-                                                                                     range) {
-                if (work.should_stop()) {
-                    return;
-                }
-                std::uint64_t count = 0;
-                for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                    for (const std::uint32_t u : {seed[t], warm.empty() ? UINT32_MAX : warm[t]}) {
-                        if (u == UINT32_MAX || (u < t && named_by(u, t))) {
-                            continue;
-                        }
-                        test(t, u, count);
-                    }
-                }
-                tests += count;
+            // Two passes: the remembered pairs first, then the 2-ring seeds, which then meet
+            // finite bounds on both sides and are mostly pruned by lower_bound_until instead of
+            // tested (on a cold frame the first pass is empty). A pair both sides name, or that
+            // the first pass named, is tested once: from the smaller index within a pass.
+            auto seed_pass = [&](const std::vector<std::uint32_t>& pick, auto&& skip) {
+                tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
+                                  [&](const auto& range) {
+                                      if (work.should_stop()) {
+                                          return;
+                                      }
+                                      std::uint64_t count = 0;
+                                      for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                                          const std::uint32_t u = pick[t];
+                                          if (u == UINT32_MAX || skip(t, u)) {
+                                              continue;
+                                          }
+                                          test(t, u, count);
+                                      }
+                                      tests += count;
+                                  });
+            };
+            if (!warm.empty()) {
+                seed_pass(warm,
+                          [&](std::uint32_t t, std::uint32_t u) { return u < t && warm[u] == t; });
+            }
+            seed_pass(seed, [&](std::uint32_t t, std::uint32_t u) {
+                return (!warm.empty() && (warm[t] == u || warm[u] == t)) || (u < t && seed[u] == t);
             });
         }
         if (work.should_stop()) {
