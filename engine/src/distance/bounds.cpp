@@ -54,6 +54,10 @@ double one_side(const Triangle& p, const PlaneFrame& f, const Triangle& q) {
 
 namespace {
 
+double l1_norm(const Vec3& d) {
+    return std::abs(d.x) + std::abs(d.y) + std::abs(d.z);
+}
+
 Vec3 centroid_of(const Triangle& a) {
     return (a[0] + a[1] + a[2]) / 3.0;
 }
@@ -104,6 +108,7 @@ EdgeFrame edge_frame(const Triangle& a) {
     EdgeFrame f;
     f.plane = plane_frame(a);
     f.centroid = centroid_of(a);
+    f.reach = std::max(l1_norm(a[1] - a[0]), l1_norm(a[2] - a[0]));
     const Vec3& n = f.plane.n;
     for (int i = 0; i < 3; ++i) {
         const Vec3& p = a[i];
@@ -152,16 +157,10 @@ double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
 
 // An upper bound on the largest distance from a's first corner to a corner of either triangle
 // (the largest L1 distance: no square root): the lever arm of the rounding of edge_side's
-// projections.
-double reach_from(const Vec3& origin, const Triangle& a, const Triangle& b) {
-    double r = 0.0;
-    for (const auto* t : {&a, &b}) {
-        for (const auto& p : *t) {
-            const Vec3 d = p - origin;
-            r = std::max(r, std::abs(d.x) + std::abs(d.y) + std::abs(d.z));
-        }
-    }
-    return r;
+// projections. From the frames' own reaches and one difference (the triangle inequality), not
+// from all six corners: a little larger at most, which only widens the error term.
+double reach_from(const Triangle& a, const EdgeFrame& fa, const Triangle& b, const EdgeFrame& fb) {
+    return std::max(fa.reach, l1_norm(b[0] - a[0]) + fb.reach);
 }
 
 // A gap along a direction of length 1 (edge_side) less its rounding and the slack, or 0. Same
@@ -174,9 +173,9 @@ double gap_bound(double gap, double reach, double slack) {
 
 // The edge bound from a's side `ab` (edge_side(a, fa, b)) and b's side: where a's edge normals
 // point away from b the gap is negative, so only edges facing b count; the larger gap, with its
-// own triangle's lever arm. `reach_a` is reach_from(a[0], a, b) when the caller has it, else < 0.
-double edge_bound_from(const Triangle& a, double ab, double reach_a, const Triangle& b,
-                       const EdgeFrame& fb, double slack) {
+// own triangle's lever arm. `reach_a` is reach_from(a, fa, b, fb) when the caller has it, else < 0.
+double edge_bound_from(const Triangle& a, const EdgeFrame& fa, double ab, double reach_a,
+                       const Triangle& b, const EdgeFrame& fb, double slack) {
     const double ba = edge_side(b, fb, a);
     const double gap = std::max(ab, ba);
     if (!(gap > 0.0)) {
@@ -184,9 +183,9 @@ double edge_bound_from(const Triangle& a, double ab, double reach_a, const Trian
     }
     double reach = 0.0;
     if (ab >= ba) {
-        reach = reach_a >= 0.0 ? reach_a : reach_from(a[0], a, b);
+        reach = reach_a >= 0.0 ? reach_a : reach_from(a, fa, b, fb);
     } else {
-        reach = reach_from(b[0], b, a);
+        reach = reach_from(b, fb, a, fa);
     }
     return gap_bound(gap, reach, slack);
 }
@@ -195,7 +194,7 @@ double edge_bound_from(const Triangle& a, double ab, double reach_a, const Trian
 
 double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                         const EdgeFrame& fb, double slack) {
-    return edge_bound_from(a, edge_side(a, fa, b), -1.0, b, fb, slack);
+    return edge_bound_from(a, fa, edge_side(a, fa, b), -1.0, b, fb, slack);
 }
 
 double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
@@ -210,14 +209,14 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // bound 0.3-5 % more. Its first side (a's edges) alone, when it already reaches the
     // threshold, spares the second; otherwise the value is edge_lower_bound(a, fa, b, fb, slack).
     const double ab = edge_side(a, fa, b);
-    const double reach_a = ab > 0.0 ? reach_from(a[0], a, b) : -1.0;
+    const double reach_a = ab > 0.0 ? reach_from(a, fa, b, fb) : -1.0;
     if (ab > 0.0) {
         const double lb_a = gap_bound(ab, reach_a, slack);
         if (lb_a > 0.0 && lb_a * lb_a >= threshold_sq) {
             return lb_a;
         }
     }
-    double lb = edge_bound_from(a, ab, reach_a, b, fb, slack);
+    double lb = edge_bound_from(a, fa, ab, reach_a, b, fb, slack);
     if (lb * lb >= threshold_sq) {
         return lb;
     }

@@ -146,6 +146,46 @@ TEST(TriangleLowerBounds, EdgeBoundIsTightAcrossATriangleBetweenNeighbours) {
     }
 }
 
+TEST(TriangleLowerBounds, EdgeBoundCoversItsOwnRoundingWithoutSlack) {
+    // The edge bound's own error term (its lever arm from the triangles' corners), alone: no
+    // slack. Random oblique triangles and b on the far side of one of a's edges, in a's plane,
+    // a few ulps of the triangles' size away, at several scales and distances from the origin:
+    // the rounding of the in-plane projections is then as large as the gap, and the bound must
+    // still stay under the computed distance (it fails with the error term left out).
+    std::mt19937_64 rng(2026);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    int positive = 0;
+    for (const double scale : {1e-3, 1.0, 1e3}) {
+        for (int i = 0; i < 20000; ++i) {
+            const Vec3 base = (50.0 * scale) * Vec3{u(rng), u(rng), u(rng)};
+            const Triangle a = random_triangle(rng, base, scale);
+            const Vec3 e = a[1] - a[0];
+            const Vec3 n = cross(e, a[2] - a[0]);
+            Vec3 m = cross(e, n);  // in a's plane, normal to edge 0
+            if (dot(m, a[2] - a[0]) > 0.0) {
+                m = -1.0 * m;  // away from the third corner
+            }
+            const double len = norm(m);
+            if (!(len > 0.0)) {
+                continue;
+            }
+            m = (1.0 / len) * m;
+            const double gap = scale * std::ldexp(1.0, -44 - (i % 8));  // a few ulps of the size
+            const double s = 0.25 + 0.5 * std::abs(u(rng));
+            const Vec3 foot = a[0] + s * e + gap * m;
+            const Triangle b{foot, foot + scale * std::abs(u(rng)) * m + 0.3 * e,
+                             foot + scale * std::abs(u(rng)) * m - 0.3 * e};
+            const double exact = exact_distance(a, b);
+            const double edge = edge_lower_bound(a, b, 0.0);
+            ASSERT_LE(edge, exact) << "scale " << scale << " pair " << i;
+            ASSERT_LE(lower_bound_until(a, b, 0.0, 1e-300), exact) << "scale " << scale;
+            positive += edge > 0.0 ? 1 : 0;
+        }
+    }
+    // Most of them are separated by more than the error term: the test reaches the bound.
+    EXPECT_GT(positive, 1000);
+}
+
 TEST(TriangleLowerBounds, PlaneBoundIsTightForParallelTrianglesAbove) {
     const Triangle a{Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0, 1, 0}};
     const Triangle b{Vec3{0.1, 0.1, 2}, Vec3{0.6, 0.1, 2}, Vec3{0.1, 0.6, 2}};

@@ -94,6 +94,7 @@ struct EdgeFrame {
     double extent[3];
     PlaneFrame plane;
     Vec3 centroid;
+    double reach;  // the largest L1 distance from the first corner to the others
 };
 EdgeFrame edge_frame(const Triangle& a);
 // The same bound from frames made by edge_frame(a) and edge_frame(b).
