@@ -360,6 +360,12 @@ class SelfBests {
     std::array<std::mutex, 256> m_locks;
 };
 
+// One object's previous self answer (ProximityEngine::SelfMemory), per triangle.
+struct SelfHint {
+    const std::vector<std::uint32_t>* closest = nullptr;
+    const std::vector<double>* distance = nullptr;
+};
+
 // Intra-object query (seed §5.2.2): for every triangle, its closest triangle sharing no vertex.
 // With culling, one 2-ring neighbour per triangle seeds its bound (and its partner's), then the
 // culler's dual traversal proposes every pair that may still beat either triangle's bound (a pair
@@ -367,13 +373,14 @@ class SelfBests {
 // non-adjacent pair.
 // With the discrete-Voronoi culler, the kernel's partner of each triangle (Lemma 1: the
 // second-order governor of its best sample) replaces the 2-ring seed where it has one.
-// `hints[a]` (null or of another size: none) is object a's previous answer, closest triangle per
-// triangle: a warm frame also seeds each triangle with it, beside the 2-ring seed, where it lies
-// outside the 2-ring (see ProximityEngine::forget_coherence). A hint is only a candidate: it is
-// checked (in range, not adjacent) and tested exactly at the current positions, so it gives an
-// upper bound whatever happened since.
+// `hints[a]` (null, or of another size: none) is object a's previous answer: closest triangle and
+// distance per triangle (see ProximityEngine::forget_coherence). A warm frame tests each
+// triangle's remembered partner first; where that pair is still about as close as it was (at most
+// twice the distance), the 2-ring seed is not searched for: the remembered pair's bound is as
+// tight as a seed's. A hint is only a candidate: it is checked (in range, not adjacent) and
+// tested exactly at the current positions, so it gives an upper bound whatever happened since.
 Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result,
-                const std::vector<const std::vector<std::uint32_t>*>& hints) {
+                const std::vector<SelfHint>& hints) {
     const std::size_t n = scene.size();
     result.self.assign(n, {});
     for (std::size_t a = 0; a < n; ++a) {
@@ -462,43 +469,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                                       frames[t] = edge_frame(tri[t]);
                                   }
                               });
-            tbb::parallel_for(
-                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
-                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-                        if (!partner.empty() && partner[t] != UINT32_MAX) {
-                            seed[t] = partner[t];
-                            continue;
-                        }
-                        double nearest = std::numeric_limits<double>::infinity();
-                        for (auto u : topo.cached_two_ring(t)) {
-                            const double d = squared_norm(frames[u].centroid - frames[t].centroid);
-                            if (d < nearest) {
-                                nearest = d;
-                                seed[t] = u;
-                            }
-                        }
-                    }
-                });
-            // Warm frame: also the previous answer's triangle, where it is still a valid partner
-            // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
-            // the last positions, so under coherent motion it still is or nearly is: near-final
-            // bounds before any node threshold is computed. Both candidates are offered (after a
-            // large move the old answer can be far worse than the 2-ring's), so a warm bound is
-            // never looser than a cold one.
-            if (a < hints.size() && hints[a] != nullptr && hints[a]->size() == nt) {
-                warm.assign(nt, UINT32_MAX);
-                const auto& hint = *hints[a];
-                for (std::uint32_t t = 0; t < nt; ++t) {
-                    const std::uint32_t u = hint[t];
-                    if (u < nt && u != t && !topo.adjacent(t, u)) {
-                        warm[t] = u;
-                    }
-                }
-            }
-            // Two passes: the remembered pairs first, then the 2-ring seeds, which then meet
-            // finite bounds on both sides and are mostly pruned by lower_bound_until instead of
-            // tested (on a cold frame the first pass is empty). A pair both sides name, or that
-            // the first pass named, is tested once: from the smaller index within a pass.
+            // Each pass tests one candidate per triangle; a pair both sides name, or that an
+            // earlier pass named, is tested once (from the smaller index within a pass).
             auto seed_pass = [&](const std::vector<std::uint32_t>& pick, auto&& skip) {
                 tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 512),
                                   [&](const auto& range) {
@@ -516,10 +488,56 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                                       tests += count;
                                   });
             };
-            if (!warm.empty()) {
+            // Warm frame: first the previous answer's triangle, where it is still a valid partner
+            // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
+            // the last positions, so under coherent motion it still is or nearly is: near-final
+            // bounds before any node threshold is computed.
+            const SelfHint hint = a < hints.size() ? hints[a] : SelfHint{};
+            if (hint.closest != nullptr && hint.distance != nullptr && hint.closest->size() == nt &&
+                hint.distance->size() == nt) {
+                warm.assign(nt, UINT32_MAX);
+                for (std::uint32_t t = 0; t < nt; ++t) {
+                    const std::uint32_t u = (*hint.closest)[t];
+                    if (u < nt && u != t && !topo.adjacent(t, u)) {
+                        warm[t] = u;
+                    }
+                }
                 seed_pass(warm,
                           [&](std::uint32_t t, std::uint32_t u) { return u < t && warm[u] == t; });
             }
+            // Seed §5.2.2, reduced to its best candidate: the 2-ring triangle with the nearest
+            // centroid is almost always the closest or near it, so one exact test gives each
+            // triangle a tight bound; the traversal below finds the rest. (Measured: testing the
+            // whole 2-ring took 2-3x the exact tests.) Every triangle picks its own seed among its
+            // whole 2-ring (not only larger indices: a triangle left without a bound is what makes
+            // the traversal expensive). On a warm frame only where the remembered pair did not
+            // give a bound within twice its last distance (after a large move the old answer can
+            // be far worse than the 2-ring's), so a warm bound is then as good as a cold one.
+            tbb::parallel_for(
+                tbb::blocked_range<std::uint32_t>(0, nt, 512), [&](const auto& range) {
+                    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                        if (!partner.empty() && partner[t] != UINT32_MAX) {
+                            seed[t] = partner[t];
+                            continue;
+                        }
+                        if (!warm.empty() && warm[t] != UINT32_MAX) {
+                            const double last = 2.0 * (*hint.distance)[t];
+                            if (bests.bound(t) <= last * last) {
+                                continue;
+                            }
+                        }
+                        double nearest = std::numeric_limits<double>::infinity();
+                        for (auto u : topo.cached_two_ring(t)) {
+                            const double d = squared_norm(frames[u].centroid - frames[t].centroid);
+                            if (d < nearest) {
+                                nearest = d;
+                                seed[t] = u;
+                            }
+                        }
+                    }
+                });
+            // Then the 2-ring seeds: after a warm first pass they meet finite bounds on both
+            // sides, and lower_bound_until prunes most of them instead of testing them.
             seed_pass(seed, [&](std::uint32_t t, std::uint32_t u) {
                 return (!warm.empty() && (warm[t] == u || warm[u] == t)) || (u < t && seed[u] == t);
             });
@@ -855,12 +873,12 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     }
     if (request.self) {
         t0 = Clock::now();
-        std::vector<const std::vector<std::uint32_t>*> hints(m_scene.size(), nullptr);
+        std::vector<SelfHint> hints(m_scene.size());
         for (std::size_t a = 0; a < m_scene.size(); ++a) {
             const auto it = m_self_memory.find(m_scene[a].id);
             if (it != m_self_memory.end() &&
                 it->second.topology_version == m_scene[a].topology_version) {
-                hints[a] = &it->second.closest;
+                hints[a] = {&it->second.closest, &it->second.distance};
             }
         }
         if (Status s = run_self(m_scene, culler, work, result, hints); !s.ok()) {
@@ -874,9 +892,11 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
                 SelfMemory& m = memory[m_scene[a].id];
                 m.topology_version = m_scene[a].topology_version;
                 m.closest.resize(result.self[a].size());
+                m.distance.resize(result.self[a].size());
                 for (std::size_t t = 0; t < m.closest.size(); ++t) {
                     const auto c = result.self[a][t].closest;
                     m.closest[t] = c == NO_OBJECT ? UINT32_MAX : static_cast<std::uint32_t>(c);
+                    m.distance[t] = result.self[a][t].distance;
                 }
             }
             m_self_memory = std::move(memory);

@@ -170,7 +170,8 @@ class ProximityEngine {
     // the topology it was computed on: hints only, every one is checked and tested again.
     struct SelfMemory {
         std::uint64_t topology_version = 0;
-        std::vector<std::uint32_t> closest;
+        std::vector<std::uint32_t> closest;  // per triangle; UINT32_MAX: none
+        std::vector<double> distance;        // to it
     };
     std::unordered_map<ObjectId, SelfMemory> m_self_memory;
 };
