@@ -201,13 +201,37 @@ double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     return edge_lower_bound(a, edge_frame(a), b, edge_frame(b), slack);
 }
 
+namespace {
+
+// One triangle's plane gap h and edge gap g together: every point of b is at least h from a's
+// plane (all of b on one side) and at least g beyond one of a's edges in the plane's directions,
+// and the two are orthogonal, so b is at least sqrt(h^2 + g^2) from a. `h` is one_side's value
+// (its error already subtracted); `gap` and `reach` are edge_side's and its lever arm, whose
+// error term is doubled here for the edge normals' small component along the plane normal (the
+// orthogonality is exact only for exact directions). The square root and squares round by a few
+// ulps: 16 more off, relatively. 0 unless both gaps are positive.
+double pythagoras(double h, double gap, double reach) {
+    if (!(gap > 0.0)) {
+        return 0.0;  // (and `reach` may be the callers' "not computed", -1)
+    }
+    const double g = gap - 128.0 * std::numeric_limits<double>::epsilon() * reach;
+    if (!(h > 0.0) || !(g > 0.0)) {
+        return 0.0;
+    }
+    return std::sqrt(h * h + g * g) * (1.0 - 16.0 * std::numeric_limits<double>::epsilon());
+}
+
+}  // namespace
+
 double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                          const EdgeFrame& fb, double slack, double threshold_sq) {
     // Most pruning per instruction first (docs/benchmarks.md, "In-plane edge bound"): with its
     // per-triangle frames the edge bound is the cheapest and alone prunes 44-68 % of the self
-    // search's candidates on cloth-ball and rod-twist; the plane bound most of the rest, the axis
-    // bound 0.3-5 % more. Its first side (a's edges) alone, when it already reaches the
-    // threshold, spares the second; otherwise the value is edge_lower_bound(a, fa, b, fb, slack).
+    // search's candidates on cloth-ball and rod-twist; the plane bound most of the rest; then
+    // the two together (a triangle above another's plane and beside its edges, as in a fold),
+    // then the axis bound. Its first side (a's edges) alone, when it already reaches the
+    // threshold, spares the second; otherwise the edge step's value is
+    // edge_lower_bound(a, fa, b, fb, slack).
     const double ab = edge_side(a, fa, b);
     const double reach_a = ab > 0.0 ? reach_from(a, fa, b, fb) : -1.0;
     if (ab > 0.0) {
@@ -216,15 +240,40 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
             return lb_a;
         }
     }
-    double lb = edge_bound_from(a, fa, ab, reach_a, b, fb, slack);
+    const double ba = edge_side(b, fb, a);
+    const double reach_b = ba > 0.0 ? reach_from(b, fb, a, fa) : -1.0;
+    double lb = 0.0;
+    if (std::max(ab, ba) > 0.0) {
+        lb = ab >= ba ? gap_bound(ab, reach_a, slack) : gap_bound(ba, reach_b, slack);
+    }
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    lb = std::max(lb, plane_lower_bound(a, fa, b, fb, slack));
+    const double ha = one_side(a, fa.plane, b);
+    const double hb = one_side(b, fb.plane, a);
+    lb = std::max(lb, std::max(0.0, std::max(ha, hb) - slack));
+    if (lb * lb >= threshold_sq) {
+        return lb;
+    }
+    const double both = std::max(pythagoras(ha, ab, reach_a), pythagoras(hb, ba, reach_b)) - slack;
+    lb = std::max(lb, both);
     if (lb * lb >= threshold_sq) {
         return lb;
     }
     return std::max(lb, axis_bound(a, fa.centroid, b, fb.centroid, slack));
+}
+
+double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    const EdgeFrame fa = edge_frame(a);
+    const EdgeFrame fb = edge_frame(b);
+    const double ab = edge_side(a, fa, b);
+    const double ba = edge_side(b, fb, a);
+    const double lb =
+        std::max(
+            pythagoras(one_side(a, fa.plane, b), ab, ab > 0.0 ? reach_from(a, fa, b, fb) : 0.0),
+            pythagoras(one_side(b, fb.plane, a), ba, ba > 0.0 ? reach_from(b, fb, a, fa) : 0.0)) -
+        slack;
+    return lb > 0.0 ? lb : 0.0;
 }
 
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {

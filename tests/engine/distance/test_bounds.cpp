@@ -56,14 +56,17 @@ TEST(TriangleLowerBounds, NeverAboveTheComputedDistance) {
             const double plane = plane_lower_bound(a, b, slack);
             const double axis = axis_lower_bound(a, b, slack);
             const double edge = edge_lower_bound(a, b, slack);
+            const double both = plane_edge_lower_bound(a, b, slack);
             ASSERT_LE(plane, exact) << "scale " << scale << " pair " << i;
             ASSERT_LE(axis, exact) << "scale " << scale << " pair " << i;
             ASSERT_LE(edge, exact) << "scale " << scale << " pair " << i;
+            ASSERT_LE(both, exact) << "scale " << scale << " pair " << i;
             ASSERT_GE(plane, 0.0);
             ASSERT_GE(axis, 0.0);
             ASSERT_GE(edge, 0.0);
+            ASSERT_GE(both, 0.0);
             // Without a threshold to stop at, the early-out evaluation gives the strongest bound.
-            const double lb = std::max({plane, axis, edge});
+            const double lb = std::max({plane, axis, edge, both});
             ASSERT_EQ(lower_bound_until(a, b, slack, std::numeric_limits<double>::infinity()), lb);
             if (lb > 0.0) {
                 const double below = lb * lb * (1.0 - 1e-12);
@@ -111,6 +114,7 @@ TEST(TriangleLowerBounds, NearTouchingPairsStayBelowTheComputedDistance) {
         ASSERT_LE(plane_lower_bound(a, b, slack), exact) << "gap " << gap;
         ASSERT_LE(axis_lower_bound(a, b, slack), exact) << "gap " << gap;
         ASSERT_LE(edge_lower_bound(a, b, slack), exact) << "gap " << gap;
+        ASSERT_LE(plane_edge_lower_bound(a, b, slack), exact) << "gap " << gap;
     }
 }
 
@@ -146,7 +150,7 @@ TEST(TriangleLowerBounds, EdgeBoundIsTightAcrossATriangleBetweenNeighbours) {
     }
 }
 
-TEST(TriangleLowerBounds, EdgeBoundCoversItsOwnRoundingWithoutSlack) {
+TEST(TriangleLowerBounds, EdgeBoundsCoverTheirOwnRoundingWithoutSlack) {
     // The edge bound's own error term (its lever arm from the triangles' corners), alone: no
     // slack. Random oblique triangles and b on the far side of one of a's edges, in a's plane,
     // a few ulps of the triangles' size away, at several scales and distances from the origin:
@@ -155,6 +159,7 @@ TEST(TriangleLowerBounds, EdgeBoundCoversItsOwnRoundingWithoutSlack) {
     std::mt19937_64 rng(2026);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     int positive = 0;
+    int both_positive = 0;
     for (const double scale : {1e-3, 1.0, 1e3}) {
         for (int i = 0; i < 20000; ++i) {
             const Vec3 base = (50.0 * scale) * Vec3{u(rng), u(rng), u(rng)};
@@ -180,10 +185,52 @@ TEST(TriangleLowerBounds, EdgeBoundCoversItsOwnRoundingWithoutSlack) {
             ASSERT_LE(edge, exact) << "scale " << scale << " pair " << i;
             ASSERT_LE(lower_bound_until(a, b, 0.0, 1e-300), exact) << "scale " << scale;
             positive += edge > 0.0 ? 1 : 0;
+            // The same pair lifted off a's plane by about as much: the plane and edge gaps
+            // together, also without slack.
+            const Vec3 up = (gap * (0.5 + std::abs(u(rng))) / norm(n)) * n;
+            const Triangle lifted{b[0] + up, b[1] + up, b[2] + up};
+            const double lifted_exact = exact_distance(a, lifted);
+            ASSERT_LE(plane_edge_lower_bound(a, lifted, 0.0), lifted_exact)
+                << "scale " << scale << " pair " << i;
+            ASSERT_LE(lower_bound_until(a, lifted, 0.0, std::numeric_limits<double>::infinity()),
+                      lifted_exact)
+                << "scale " << scale << " pair " << i;
+            both_positive += plane_edge_lower_bound(a, lifted, 0.0) > 0.0 ? 1 : 0;
         }
     }
     // Most of them are separated by more than the error term: the test reaches the bound.
     EXPECT_GT(positive, 1000);
+    EXPECT_GT(both_positive, 1000);
+}
+
+TEST(TriangleLowerBounds, PlaneAndEdgeTogetherAreTightBesideAndAbove) {
+    // b lies above a's plane by h and beyond a's edge (1,0,0)-(1,1,0) by g, as across a fold of
+    // cloth: each gap alone bounds the distance by h or g, the two together by sqrt(h^2 + g^2),
+    // which is the distance here; and lower_bound_until reaches it where the others fall short.
+    const Triangle a{Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{1, 1, 0}};
+    for (int k = 0; k < 40; ++k) {
+        const double h = std::ldexp(0.75, -k);
+        const double g = std::ldexp(1.0, -k);
+        const Triangle b{Vec3{1 + g, 0, h}, Vec3{2 + g, 1, h}, Vec3{1 + g, 1, h}};
+        const double slack = slack_of(a, b);
+        const double exact = exact_distance(a, b);
+        ASSERT_NEAR(exact, 1.25 * g, 1e-15 * g + 1e-16);
+        const double both = plane_edge_lower_bound(a, b, slack);
+        ASSERT_LE(both, exact) << "k " << k;
+        ASSERT_LE(plane_edge_lower_bound(b, a, slack), exact) << "k " << k;
+        if (k < 20) {
+            EXPECT_NEAR(both, exact, 1e-9) << "k " << k;
+            EXPECT_LT(std::max({plane_lower_bound(a, b, slack), edge_lower_bound(a, b, slack),
+                                axis_lower_bound(a, b, slack)}),
+                      0.85 * exact)
+                << "k " << k;
+            // A threshold above the other bounds but below the distance: reached.
+            const double t = 0.95 * exact;
+            const double reached = lower_bound_until(a, b, slack, t * t);
+            EXPECT_GE(reached, t) << "k " << k;
+            EXPECT_LE(reached, exact) << "k " << k;
+        }
+    }
 }
 
 TEST(TriangleLowerBounds, PlaneBoundIsTightForParallelTrianglesAbove) {

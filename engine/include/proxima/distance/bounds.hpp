@@ -104,7 +104,12 @@ double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& 
 double plane_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                          const EdgeFrame& fb, double slack);
 
-// The edge, plane and axis bounds in turn, stopping at the first whose
+// The plane and edge gaps of one triangle's frame together: b above a's plane by h and beyond one
+// of a's edges by g is at least sqrt(h^2 + g^2) from a (either way round, the larger). 0 unless
+// some triangle has both gaps positive.
+double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
+
+// The edge, plane, plane-and-edge and axis bounds in turn, stopping at the first whose
 // square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
 // its square reaches the threshold; a positive value also proves the triangles disjoint.
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
