@@ -136,11 +136,11 @@ class ProximityEngine {
     bool has_gpu_backend() const { return m_gpu_backend != nullptr; }
 
     // Frame-to-frame coherence: a self query remembers each object's answer (every triangle's
-    // closest triangle), and the next self query on an object of the same topology also seeds
-    // each triangle's bound with an exact test against that triangle at the new positions, where
-    // it lies outside the triangle's 2-ring (an upper bound whatever the motion, so answers never
-    // depend on it). This forgets it: the next
-    // query runs cold (benchmarks compare warm and cold frames with it).
+    // closest triangle and distance), and the next self query on an object of the same topology
+    // first seeds each triangle's bound with an exact test against that triangle at the new
+    // positions (an upper bound whatever the motion, so answers never depend on it), and skips
+    // the 2-ring seed search where that pair is still within twice its last distance. This
+    // forgets it: the next query runs cold (benchmarks compare warm and cold frames with it).
     void forget_coherence() { m_self_memory.clear(); }
 
   private:
