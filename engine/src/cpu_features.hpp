@@ -12,13 +12,12 @@
 namespace proxima::detail {
 
 #ifdef PROXIMA_X86_64_DISPATCH
-// Read once, on the first call (thread-safe; one value for the whole program).
+// Each caller reads it once at start-up into a constant of its own file (a check per call would
+// cost its hot loop; a call from another file's static initializer before that reads false and
+// takes the portable copy: the same answers).
 inline bool cpu_has_avx2() {
-    static const bool HAS_AVX2 = [] {
-        __builtin_cpu_init();
-        return __builtin_cpu_supports("avx2") != 0;
-    }();
-    return HAS_AVX2;
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") != 0;
 }
 #endif
 

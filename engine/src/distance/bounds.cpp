@@ -171,37 +171,22 @@ double gap_bound(double gap, double reach, double slack) {
     return lb > 0.0 ? lb : 0.0;
 }
 
-// The edge bound from a's side `ab` (edge_side(a, fa, b)) and b's side: where a's edge normals
-// point away from b the gap is negative, so only edges facing b count; the larger gap, with its
-// own triangle's lever arm. `reach_a` is reach_from(a, fa, b, fb) when the caller has it, else < 0.
-double edge_bound_from(const Triangle& a, const EdgeFrame& fa, double ab, double reach_a,
-                       const Triangle& b, const EdgeFrame& fb, double slack) {
-    const double ba = edge_side(b, fb, a);
-    const double gap = std::max(ab, ba);
-    if (!(gap > 0.0)) {
+// reach_from where edge_side found a positive gap `side` (the only case its rounding matters),
+// else 0.
+double side_reach(double side, const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                  const EdgeFrame& fb) {
+    return side > 0.0 ? reach_from(a, fa, b, fb) : 0.0;
+}
+
+// The edge bound from both sides' gaps (`ab` = edge_side(a, fa, b), `ba` the other way) and their
+// lever arms: where a's edge normals point away from b the gap is negative, so only edges facing b
+// count; the larger gap, with its own triangle's lever arm.
+double edge_bound_from(double ab, double reach_a, double ba, double reach_b, double slack) {
+    if (!(std::max(ab, ba) > 0.0)) {
         return 0.0;
     }
-    double reach = 0.0;
-    if (ab >= ba) {
-        reach = reach_a >= 0.0 ? reach_a : reach_from(a, fa, b, fb);
-    } else {
-        reach = reach_from(b, fb, a, fa);
-    }
-    return gap_bound(gap, reach, slack);
+    return ab >= ba ? gap_bound(ab, reach_a, slack) : gap_bound(ba, reach_b, slack);
 }
-
-}  // namespace
-
-double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
-                        const EdgeFrame& fb, double slack) {
-    return edge_bound_from(a, fa, edge_side(a, fa, b), -1.0, b, fb, slack);
-}
-
-double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
-    return edge_lower_bound(a, edge_frame(a), b, edge_frame(b), slack);
-}
-
-namespace {
 
 // One triangle's plane gap h and edge gap g together: every point of b is at least h from a's
 // plane (all of b on one side) and at least g beyond one of a's edges in the plane's directions,
@@ -211,17 +196,42 @@ namespace {
 // orthogonality is exact only for exact directions). The square root and squares round by a few
 // ulps: 16 more off, relatively. 0 unless both gaps are positive.
 double pythagoras(double h, double gap, double reach) {
-    if (!(gap > 0.0)) {
-        return 0.0;  // (and `reach` may be the callers' "not computed", -1)
-    }
     const double g = gap - 128.0 * std::numeric_limits<double>::epsilon() * reach;
-    if (!(h > 0.0) || !(g > 0.0)) {
+    if (!(h > 0.0) || !(gap > 0.0) || !(g > 0.0)) {
         return 0.0;
     }
     return std::sqrt(h * h + g * g) * (1.0 - 16.0 * std::numeric_limits<double>::epsilon());
 }
 
+// The plane-and-edge bound from both triangles' plane gaps (one_side) and edge gaps.
+double plane_edge_from(double ha, double ab, double reach_a, double hb, double ba, double reach_b,
+                       double slack) {
+    const double lb = std::max(pythagoras(ha, ab, reach_a), pythagoras(hb, ba, reach_b)) - slack;
+    return lb > 0.0 ? lb : 0.0;
+}
+
 }  // namespace
+
+double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
+                        const EdgeFrame& fb, double slack) {
+    const double ab = edge_side(a, fa, b);
+    const double ba = edge_side(b, fb, a);
+    return edge_bound_from(ab, side_reach(ab, a, fa, b, fb), ba, side_reach(ba, b, fb, a, fa),
+                           slack);
+}
+
+double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    return edge_lower_bound(a, edge_frame(a), b, edge_frame(b), slack);
+}
+
+double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
+    const EdgeFrame fa = edge_frame(a);
+    const EdgeFrame fb = edge_frame(b);
+    const double ab = edge_side(a, fa, b);
+    const double ba = edge_side(b, fb, a);
+    return plane_edge_from(one_side(a, fa.plane, b), ab, side_reach(ab, a, fa, b, fb),
+                           one_side(b, fb.plane, a), ba, side_reach(ba, b, fb, a, fa), slack);
+}
 
 double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                          const EdgeFrame& fb, double slack, double threshold_sq) {
@@ -230,10 +240,9 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // search's candidates on cloth-ball and rod-twist; the plane bound most of the rest; then
     // the two together (a triangle above another's plane and beside its edges, as in a fold),
     // then the axis bound. Its first side (a's edges) alone, when it already reaches the
-    // threshold, spares the second; otherwise the edge step's value is
-    // edge_lower_bound(a, fa, b, fb, slack).
+    // threshold, spares the second. Each step's value is that of the bound of the same name.
     const double ab = edge_side(a, fa, b);
-    const double reach_a = ab > 0.0 ? reach_from(a, fa, b, fb) : -1.0;
+    const double reach_a = side_reach(ab, a, fa, b, fb);
     if (ab > 0.0) {
         const double lb_a = gap_bound(ab, reach_a, slack);
         if (lb_a > 0.0 && lb_a * lb_a >= threshold_sq) {
@@ -241,11 +250,8 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
         }
     }
     const double ba = edge_side(b, fb, a);
-    const double reach_b = ba > 0.0 ? reach_from(b, fb, a, fa) : -1.0;
-    double lb = 0.0;
-    if (std::max(ab, ba) > 0.0) {
-        lb = ab >= ba ? gap_bound(ab, reach_a, slack) : gap_bound(ba, reach_b, slack);
-    }
+    const double reach_b = side_reach(ba, b, fb, a, fa);
+    double lb = edge_bound_from(ab, reach_a, ba, reach_b, slack);
     if (lb * lb >= threshold_sq) {
         return lb;
     }
@@ -255,25 +261,11 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    const double both = std::max(pythagoras(ha, ab, reach_a), pythagoras(hb, ba, reach_b)) - slack;
-    lb = std::max(lb, both);
+    lb = std::max(lb, plane_edge_from(ha, ab, reach_a, hb, ba, reach_b, slack));
     if (lb * lb >= threshold_sq) {
         return lb;
     }
     return std::max(lb, axis_bound(a, fa.centroid, b, fb.centroid, slack));
-}
-
-double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
-    const EdgeFrame fa = edge_frame(a);
-    const EdgeFrame fb = edge_frame(b);
-    const double ab = edge_side(a, fa, b);
-    const double ba = edge_side(b, fb, a);
-    const double lb =
-        std::max(
-            pythagoras(one_side(a, fa.plane, b), ab, ab > 0.0 ? reach_from(a, fa, b, fb) : 0.0),
-            pythagoras(one_side(b, fb.plane, a), ba, ba > 0.0 ? reach_from(b, fb, a, fa) : 0.0)) -
-        slack;
-    return lb > 0.0 ? lb : 0.0;
 }
 
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {
