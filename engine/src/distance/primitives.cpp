@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "proxima/geometry/predicates.hpp"
 
@@ -458,9 +459,48 @@ bool segment_triangle_intersect(const Vec3& p, const Vec3& q, const Vec3& a, con
 
 namespace {
 
+// Guigue and Devillers' test (2003) for the common case of intersect_after_planes: each triangle
+// crosses the other's plane with no vertex on it (every sign nonzero), so one vertex of each is
+// alone on its side. Each triangle then meets the other's plane in a segment on the line where
+// the planes meet, and the closed triangles share a point iff the two segments overlap on it.
+// With each triangle rotated so that its lone vertex comes first (a0, b0) and the other one's
+// last two corners swapped, if needed, so that each lone vertex lies on the positive side of the
+// other's plane, the segments overlap iff orient3d(a0, a1, b0, b1) <= 0 and
+// orient3d(a0, a2, b2, b0) <= 0: two exact predicates instead of up to twelve. A rotation keeps a
+// plane's orientation and a swap reverses it, so no plane sign is evaluated again.
+bool crossing_segments_overlap(const Triangle& ta, const Triangle& tb, const int sa[3],
+                               const int sb[3]) {
+    auto lone = [](const int s[3]) { return s[0] == s[1] ? 2 : (s[0] == s[2] ? 1 : 0); };
+    const int ia = lone(sa);
+    const int ib = lone(sb);
+    const Vec3& a0 = ta[ia];
+    const Vec3* a1 = &ta[(ia + 1) % 3];
+    const Vec3* a2 = &ta[(ia + 2) % 3];
+    const Vec3& b0 = tb[ib];
+    const Vec3* b1 = &tb[(ib + 1) % 3];
+    const Vec3* b2 = &tb[(ib + 2) % 3];
+    if (sa[ia] < 0) {
+        std::swap(b1, b2);
+    }
+    if (sb[ib] < 0) {
+        std::swap(a1, a2);
+    }
+    return orient3d(a0, *a1, b0, *b1) <= 0 && orient3d(a0, *a2, *b2, b0) <= 0;
+}
+
 // triangles_intersect after its plane early-outs: sa[i] = orient3d(tb, ta[i]), sb[i] likewise.
 bool intersect_after_planes(const Triangle& ta, const Triangle& tb, const int sa[3],
                             const int sb[3], Vec3* witness) {
+    // Where every sign is nonzero, the two-predicate test decides; when it finds a shared point
+    // the search below runs too, for its witness (the same point as without the test).
+    if (sa[0] != 0 && sa[1] != 0 && sa[2] != 0 && sb[0] != 0 && sb[1] != 0 && sb[2] != 0) {
+        if (!crossing_segments_overlap(ta, tb, sa, sb)) {
+            return false;
+        }
+        if (witness == nullptr) {
+            return true;
+        }
+    }
     // Complete for closed convex sets: a nonempty intersection of two triangles (a segment, a
     // point, or a convex polygon when coplanar) has its extreme points on edges of one of them.
     TriangleShape shape_a;

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "proxima/distance/primitives.hpp"
+#include "proxima/geometry/predicates.hpp"
 
 namespace proxima {
 namespace {
@@ -749,6 +750,61 @@ TEST(TrianglesIntersect, TinyOffsetsJustApart) {
     EXPECT_NEAR(r.squared_distance, 1e-24, 1e-30);
     const ClosestPoints r2 = triangle_triangle(floor_corner, translated(mirrored, {-1e-12, 0, 0}));
     EXPECT_NEAR(r2.squared_distance, 1e-24, 1e-30);
+}
+
+// Pairs that cross each other's planes with no vertex on the other's plane: the case that the
+// two-predicate test (Guigue and Devillers) decides. Coordinates in -3..3 make the two segments on
+// the planes' line meet end to end often (a predicate exactly 0); -30..30 makes that rare. The
+// reference is the exact LP (small integers only).
+TEST(TrianglesIntersect, CrossingPairsAgainstExactLp) {
+    std::mt19937_64 rng(29);
+    int crossing = 0;
+    int hits = 0;
+    int touching = 0;
+    for (int it = 0; it < 40000 && crossing < 4000; ++it) {
+        const int range = it % 2 == 0 ? 3 : 30;
+        std::uniform_int_distribution<int> d(-range, range);
+        auto v = [&] { return Vec3{double(d(rng)), double(d(rng)), double(d(rng))}; };
+        const Triangle a{v(), v(), v()};
+        const Triangle b{v(), v(), v()};
+        int sa[3];
+        int sb[3];
+        for (int i = 0; i < 3; ++i) {
+            sa[i] = orient3d(b[0], b[1], b[2], a[i]);
+            sb[i] = orient3d(a[0], a[1], a[2], b[i]);
+        }
+        auto crosses = [](const int s[3]) {
+            return s[0] != 0 && s[1] != 0 && s[2] != 0 && !(s[0] == s[1] && s[1] == s[2]);
+        };
+        if (!crosses(sa) || !crosses(sb)) {
+            continue;
+        }
+        ++crossing;
+        const bool expected = ref_triangles_intersect(a, b);
+        hits += expected;
+        // Touching only: a shift by one unit along some axis, one way or the other, separates
+        // them (some of these meet in a single point of the planes' line).
+        if (expected && range == 3) {
+            for (const Vec3& shift : {Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}}) {
+                if (!ref_triangles_intersect(a, translated(b, shift)) ||
+                    !ref_triangles_intersect(a, translated(b, -1.0 * shift))) {
+                    ++touching;
+                    break;
+                }
+            }
+        }
+        if (crossing <= 300) {
+            expect_order_invariant(a, b, expected);
+        } else {
+            ASSERT_EQ(triangles_intersect(a, b), expected) << it;
+            ASSERT_EQ(triangles_intersect(b, a), expected) << it;
+        }
+        ASSERT_EQ(triangle_triangle(a, b).squared_distance == 0.0, expected) << it;
+    }
+    EXPECT_EQ(crossing, 4000);
+    EXPECT_GT(hits, 800);
+    EXPECT_LT(hits, 3200);
+    EXPECT_GT(touching, 0);
 }
 
 TEST(TrianglesIntersect, SmallIntegersAgainstExactLp) {
