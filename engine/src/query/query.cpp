@@ -311,6 +311,7 @@ class SelfBests {
           m_slack(slack),
           m_bound(out.size()),
           m_threshold(out.size()),
+          m_touching(out.size()),
           m_exact(out.size(), std::numeric_limits<double>::infinity()) {
         for (auto& b : m_bound) {
             b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
@@ -318,12 +319,24 @@ class SelfBests {
         for (auto& b : m_threshold) {
             b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
         }
+        for (auto& c : m_touching) {
+            c.store(UINT32_MAX, std::memory_order_relaxed);
+        }
     }
     double bound(std::uint32_t t) const { return m_bound[t].load(std::memory_order_relaxed); }
     // cull_threshold_sq of the bound, kept beside it (a square root per improvement, not per
     // candidate pair). Read without the lock it may be an earlier bound's: larger, so still valid.
     double threshold(std::uint32_t t) const {
         return m_threshold[t].load(std::memory_order_relaxed);
+    }
+    // Whether pair (t, u) can no longer change t's answer, whatever its distance: t already
+    // touches a triangle (distance exactly 0) whose index is at most u, and the tie-break keeps
+    // the smaller index. Touching triangles (self-intersecting cloth) otherwise meet many pairs
+    // that no bound can prune, each an exact test with its intersection search. The index only
+    // decreases once set, so a value read without the lock (an earlier one, or none) is at least
+    // the current one: never a wrong skip.
+    bool settled(std::uint32_t t, std::uint32_t u) const {
+        return u >= m_touching[t].load(std::memory_order_relaxed);
     }
 
     void offer(std::uint32_t t, std::uint32_t u, double d_sq, const Vec3& p, const Vec3& q) {
@@ -340,6 +353,9 @@ class SelfBests {
             best.other_point = q;
             m_bound[t].store(d_sq, std::memory_order_relaxed);
             m_threshold[t].store(cull_threshold_sq(d_sq, m_slack), std::memory_order_relaxed);
+            if (d_sq == 0.0) {
+                m_touching[t].store(u, std::memory_order_relaxed);
+            }
         }
     }
 
@@ -356,6 +372,7 @@ class SelfBests {
     double m_slack;
     std::vector<std::atomic<double>> m_bound;
     std::vector<std::atomic<double>> m_threshold;
+    std::vector<std::atomic<std::uint32_t>> m_touching;  // UINT32_MAX: not touching yet
     std::vector<double> m_exact;
     std::array<std::mutex, 256> m_locks;
 };
@@ -446,6 +463,9 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                         return;
                     }
                 }
+            }
+            if (cull && bests.settled(t, u) && bests.settled(u, t)) {
+                return;  // brute force tests every pair, as its count says
             }
             ++count;
             const auto cp = triangle_triangle(x, y, lb > 0.0);
