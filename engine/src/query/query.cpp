@@ -421,6 +421,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         const auto nt = static_cast<std::uint32_t>(obj.triangle_count());
         const double slack = rounding_slack(coordinate_scale(obj.box));
         SelfBests bests(result.self[a], slack);
+        const double touching_threshold = cull_threshold_sq(0.0, slack);
         std::atomic<std::uint64_t> tests{0};
         // Each triangle's corners, gathered once per query: a candidate pair reads two runs of
         // 72 bytes instead of six vertex lookups through the topology.
@@ -457,15 +458,17 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             if (cull) {
                 // = cull_threshold_sq of the larger bound (the function is non-decreasing).
                 const double th = std::max(bests.threshold(t), bests.threshold(u));
+                // Both bounds 0 (the threshold of a zero bound): skipped if neither answer can
+                // change, before any bound is computed (brute force tests every pair).
+                if (th <= touching_threshold && bests.settled(t, u) && bests.settled(u, t)) {
+                    return;
+                }
                 if (std::isfinite(th)) {
                     lb = lower_bound_until(x, frames[t], y, frames[u], slack, th);
                     if (lb * lb >= th) {
                         return;
                     }
                 }
-            }
-            if (cull && bests.settled(t, u) && bests.settled(u, t)) {
-                return;  // brute force tests every pair, as its count says
             }
             ++count;
             const auto cp = triangle_triangle(x, y, lb > 0.0);
