@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include "culling/cullers.hpp"
+#include "overwrite_array.hpp"
 #include "proxima/culling/leaf_rows.hpp"
 #include "proxima/distance/bounds.hpp"
 
@@ -294,7 +295,7 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         TriangleIndices v;
         std::uint32_t id;
     };
-    std::vector<Slot> slots(order.size());
+    OverwriteArray<Slot> slots(order.size());
     // The same boxes and vertex ids as structure of arrays, for the leaf rows (leaf_row).
     LeafSlots rows;
     rows.resize(order.size());

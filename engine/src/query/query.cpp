@@ -10,6 +10,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "overwrite_array.hpp"
 #include "proxima/culling/dvd.hpp"
 #include "proxima/distance/bounds.hpp"
 #include "proxima/distance/primitives.hpp"
@@ -425,14 +426,14 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         std::atomic<std::uint64_t> tests{0};
         // Each triangle's corners, gathered once per query: a candidate pair reads two runs of
         // 72 bytes instead of six vertex lookups through the topology.
-        std::vector<Triangle> tri(nt);
+        detail::OverwriteArray<Triangle> tri(nt);
         tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 4096), [&](const auto& range) {
             for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
                 tri[t] = corners(obj, t);
             }
         });
         // Each triangle's edge-bound frame, once per query (filled below when culling).
-        std::vector<EdgeFrame> frames;
+        detail::OverwriteArray<EdgeFrame> frames;
         // Each triangle's seed candidates (filled below when culling): its 2-ring (or Voronoi)
         // seed, and on a warm frame its previous answer. Every pair they name is tested exactly
         // while seeding, so the traversal skips it (testing it again gives the same value, and
@@ -485,7 +486,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // the traversal expensive), and a pair two triangles picked for each other is tested
             // once.
             seed.assign(nt, UINT32_MAX);
-            frames.resize(nt);
+            frames = detail::OverwriteArray<EdgeFrame>(nt);
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
                                   for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
