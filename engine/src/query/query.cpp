@@ -325,6 +325,8 @@ class SelfBests {
         }
     }
     double bound(std::uint32_t t) const { return m_bound[t].load(std::memory_order_relaxed); }
+    // The bounds as the culler reads them (BoundLookup).
+    const std::atomic<double>* bounds() const { return m_bound.data(); }
     // cull_threshold_sq of the bound, kept beside it (a square root per improvement, not per
     // candidate pair). Read without the lock it may be an earlier bound's: larger, so still valid.
     double threshold(std::uint32_t t) const {
@@ -572,26 +574,24 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         // The visitor runs on several threads: per-thread counts would need thread-local storage,
         // so count into a relaxed atomic in small batches.
         // A stopped query reads as a negative bound: the culler stops its traversal.
-        culler.self_pairs(
-            scene, a,
-            [&](std::uint32_t t) {
-                return work.stopped.load(std::memory_order_relaxed) ? -1.0 : bests.bound(t);
-            },
-            [&](std::uint32_t t, std::uint32_t u) {
-                if (work.stopped.load(std::memory_order_relaxed) || named_by(t, u) ||
-                    named_by(u, t)) {
-                    return;
-                }
-                std::uint64_t count = 0;
-                test(t, u, count);
-                if (count != 0) {
-                    // One object is one long traversal: look at the token every 4096 tests.
-                    const auto done = tests.fetch_add(count, std::memory_order_relaxed) + count;
-                    if ((done & 4095U) == 0) {
-                        work.should_stop();
-                    }
-                }
-            });
+        culler.self_pairs(scene, a, BoundLookup(bests.bounds(), &work.stopped),
+                          [&](std::uint32_t t, std::uint32_t u) {
+                              if (work.stopped.load(std::memory_order_relaxed) || named_by(t, u) ||
+                                  named_by(u, t)) {
+                                  return;
+                              }
+                              std::uint64_t count = 0;
+                              test(t, u, count);
+                              if (count != 0) {
+                                  // One object is one long traversal: look at the token every 4096
+                                  // tests.
+                                  const auto done =
+                                      tests.fetch_add(count, std::memory_order_relaxed) + count;
+                                  if ((done & 4095U) == 0) {
+                                      work.should_stop();
+                                  }
+                              }
+                          });
         bests.finish();
         work.exact_tests += tests.load();
     });
