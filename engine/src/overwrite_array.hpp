@@ -28,10 +28,12 @@ class OverwriteArray {
     bool empty() const { return m_size == 0; }
 
   private:
-    // A union member is not initialised unless its constructor says so: this one does not.
+    // A union member is not initialised unless its constructor says so, and this user-provided
+    // constructor does not: make_unique's value-initialisation calls it and leaves `value` unset
+    // (a defaulted one would be deleted, T's members having initialisers).
     union Cell {
         T value;
-        Cell() {}  // NOLINT(modernize-use-equals-default): = default would zero `value`
+        Cell() {}  // NOLINT(modernize-use-equals-default)
     };
     std::unique_ptr<Cell[]> m_cells;
     std::size_t m_size = 0;
