@@ -19,13 +19,11 @@ class OverwriteArray {
 
   public:
     OverwriteArray() = default;
-    explicit OverwriteArray(std::size_t n) : m_cells(std::make_unique<Cell[]>(n)), m_size(n) {}
+    explicit OverwriteArray(std::size_t n) : m_cells(std::make_unique<Cell[]>(n)) {}
 
     // Assigning an element starts its lifetime (a trivial assignment to a union member).
     T& operator[](std::size_t i) { return m_cells[i].value; }
     const T& operator[](std::size_t i) const { return m_cells[i].value; }
-    std::size_t size() const { return m_size; }
-    bool empty() const { return m_size == 0; }
 
   private:
     // A union member is not initialised unless its constructor says so, and this user-provided
@@ -36,7 +34,6 @@ class OverwriteArray {
         Cell() {}  // NOLINT(modernize-use-equals-default)
     };
     std::unique_ptr<Cell[]> m_cells;
-    std::size_t m_size = 0;
 };
 
 }  // namespace proxima::detail
