@@ -65,8 +65,9 @@ TEST(TriangleLowerBounds, NeverAboveTheComputedDistance) {
             ASSERT_GE(axis, 0.0);
             ASSERT_GE(edge, 0.0);
             ASSERT_GE(both, 0.0);
-            // Without a threshold to stop at, the early-out evaluation gives the strongest bound.
-            const double lb = std::max({plane, axis, edge, both});
+            // Without a threshold to stop at, the early-out evaluation gives the strongest of the
+            // bounds it evaluates (edge, plane, both: not the axis bound).
+            const double lb = std::max({plane, edge, both});
             ASSERT_EQ(lower_bound_until(a, b, slack, std::numeric_limits<double>::infinity()), lb);
             if (lb > 0.0) {
                 const double below = lb * lb * (1.0 - 1e-12);

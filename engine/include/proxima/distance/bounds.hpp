@@ -109,9 +109,9 @@ double plane_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle&
 // some triangle has both gaps positive.
 double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack);
 
-// The edge, plane, plane-and-edge and axis bounds in turn, stopping at the first whose
-// square reaches `threshold_sq`: the largest bound evaluated. The caller may skip the pair when
-// its square reaches the threshold; a positive value also proves the triangles disjoint.
+// The edge, plane and plane-and-edge bounds in turn, stopping at the first whose square
+// reaches `threshold_sq`: the largest bound evaluated (no axis bound). The caller may skip the pair
+// when its square reaches the threshold; a positive value also proves the triangles disjoint.
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq);
 double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                          const EdgeFrame& fb, double slack, double threshold_sq);
