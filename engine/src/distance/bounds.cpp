@@ -263,11 +263,7 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     if (lb * lb >= threshold_sq) {
         return lb;
     }
-    lb = std::max(lb, plane_edge_from(ha, ab, reach_a, hb, ba, reach_b, slack));
-    if (lb * lb >= threshold_sq) {
-        return lb;
-    }
-    return lb;
+    return std::max(lb, plane_edge_from(ha, ab, reach_a, hb, ba, reach_b, slack));
 }
 
 double lower_bound_until(const Triangle& a, const Triangle& b, double slack, double threshold_sq) {
