@@ -241,8 +241,9 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // the two together (a triangle above another's plane and beside its edges, as in a fold).
     // Its first side (a's edges) alone, when it already reaches the threshold, spares the
     // second. Each step's value is that of the bound of the same name. The centroid-axis bound
-    // is not tried after them: it pruned 0.2-0.6 % of the calls that got that far and cost more
-    // than the exact tests it spared (docs/benchmarks.md, "Axis stage dropped").
+    // is not tried after them: it pruned 1-3 % of the pairs that got that far (0.2-0.6 % of all
+    // calls) and cost more than the exact tests it spared (docs/benchmarks.md, "Ideal seeds, and
+    // the axis stage dropped").
     const double ab = edge_side(a, fa, b);
     const double reach_a = side_reach(ab, a, fa, b, fb);
     if (ab > 0.0) {
