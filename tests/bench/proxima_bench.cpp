@@ -714,13 +714,22 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
         report_mismatches(s.name + (to_t1 ? " t1" : " t0") + " rep " + std::to_string(rep),
                           engine.scene(), mism, log);
 
-        auto sr = engine.query(self);
-        if (!sr.ok()) {
-            s.skipped = sr.status().to_string();
+        // One self query, its time and exact tests recorded (false: failed, s.skipped says why).
+        auto timed_self = [&](StatusOr<QueryResult>& out, std::vector<double>& seconds,
+                              std::vector<double>& exact) {
+            out = engine.query(self);
+            if (!out.ok()) {
+                s.skipped = out.status().to_string();
+                return false;
+            }
+            seconds.push_back(out->stats.self_seconds);
+            exact.push_back(static_cast<double>(out->stats.exact_tests));
+            return true;
+        };
+        StatusOr<QueryResult> sr = QueryResult{};
+        if (!timed_self(sr, s.self, s.self_exact)) {
             return s;
         }
-        s.self.push_back(sr->stats.self_seconds);
-        s.self_exact.push_back(static_cast<double>(sr->stats.exact_tests));
         // Floor (issue #14 item 7): the exact tests the answer itself needs, one per reported
         // pair (a pair two triangles report for each other counted once), timed here on one
         // thread by running exactly those tests again.
@@ -754,22 +763,16 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
             }
         }
         // Ideal seeds: the same geometry again, seeded by its own answer (the warm query's).
-        auto ir = engine.query(self);
-        if (!ir.ok()) {
-            s.skipped = ir.status().to_string();
+        StatusOr<QueryResult> ir = QueryResult{};
+        if (!timed_self(ir, s.self_ideal, s.self_ideal_exact)) {
             return s;
         }
-        s.self_ideal.push_back(ir->stats.self_seconds);
-        s.self_ideal_exact.push_back(static_cast<double>(ir->stats.exact_tests));
         // Cold: the same geometry without the previous frame's answer (item 5: warm vs cold).
         engine.forget_coherence();
-        auto cr = engine.query(self);
-        if (!cr.ok()) {
-            s.skipped = cr.status().to_string();
+        StatusOr<QueryResult> cr = QueryResult{};
+        if (!timed_self(cr, s.self_cold, s.self_cold_exact)) {
             return s;
         }
-        s.self_cold.push_back(cr->stats.self_seconds);
-        s.self_cold_exact.push_back(static_cast<double>(cr->stats.exact_tests));
         for (std::size_t o = 0; o < sr->self.size(); ++o) {
             for (std::size_t t = 0; t < sr->self[o].size(); ++t) {
                 const auto& w = sr->self[o][t];
@@ -1255,9 +1258,6 @@ int main(int argc, char** argv) {
             "warm = a one-frame step seeded by the previous frame's answer (each triangle's "
             "closest triangle, tested again at the new positions); cold = the same geometry "
             "again after ProximityEngine::forget_coherence (2-ring seeds only).",
-            "ideal = the same geometry once more right after the warm query, seeded by that "
-            "very answer: a warm frame whose seeds are already every triangle's closest "
-            "triangle, i.e. what better seeding alone could save.",
             "warm != cold: triangles whose closest triangle or distance differ between the warm, "
             "ideal and cold answers over all steps (must be 0).",
             "floor (issue #14 item 7): the exact tests the answer itself needs, one per "
@@ -1266,6 +1266,13 @@ int main(int argc, char** argv) {
             "the query itself runs on all threads.",
             "FCL has no self-distance query; brute force costs about 48 ns per "
             "non-adjacent pair (BASELINES.md)."};
+        // Second, in a statement of its own: a fifth joined literal in the list above trips
+        // clang-tidy's missing-comma heuristic.
+        self.notes.insert(self.notes.begin() + 1,
+                          "ideal = the same geometry once more right after the warm query, "
+                          "seeded by that very answer: a warm frame whose seeds are already "
+                          "every triangle's closest triangle, i.e. what better seeding alone "
+                          "could save.");
         tables.push_back(t);
         tables.push_back(self);
     } else if (!real.empty()) {
