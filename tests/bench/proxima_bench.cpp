@@ -714,20 +714,19 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
         report_mismatches(s.name + (to_t1 ? " t1" : " t0") + " rep " + std::to_string(rep),
                           engine.scene(), mism, log);
 
-        // One self query, its time and exact tests recorded (false: failed, s.skipped says why).
-        auto timed_self = [&](StatusOr<QueryResult>& out, std::vector<double>& seconds,
-                              std::vector<double>& exact) {
-            out = engine.query(self);
-            if (!out.ok()) {
-                s.skipped = out.status().to_string();
+        // Records one self query's time and exact tests (false: it failed, s.skipped says why).
+        auto record = [&](const StatusOr<QueryResult>& r, std::vector<double>& seconds,
+                          std::vector<double>& exact) {
+            if (!r.ok()) {
+                s.skipped = r.status().to_string();
                 return false;
             }
-            seconds.push_back(out->stats.self_seconds);
-            exact.push_back(static_cast<double>(out->stats.exact_tests));
+            seconds.push_back(r->stats.self_seconds);
+            exact.push_back(static_cast<double>(r->stats.exact_tests));
             return true;
         };
-        StatusOr<QueryResult> sr = QueryResult{};
-        if (!timed_self(sr, s.self, s.self_exact)) {
+        const auto sr = engine.query(self);
+        if (!record(sr, s.self, s.self_exact)) {
             return s;
         }
         // Floor (issue #14 item 7): the exact tests the answer itself needs, one per reported
@@ -763,14 +762,14 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
             }
         }
         // Ideal seeds: the same geometry again, seeded by its own answer (the warm query's).
-        StatusOr<QueryResult> ir = QueryResult{};
-        if (!timed_self(ir, s.self_ideal, s.self_ideal_exact)) {
+        const auto ir = engine.query(self);
+        if (!record(ir, s.self_ideal, s.self_ideal_exact)) {
             return s;
         }
         // Cold: the same geometry without the previous frame's answer (item 5: warm vs cold).
         engine.forget_coherence();
-        StatusOr<QueryResult> cr = QueryResult{};
-        if (!timed_self(cr, s.self_cold, s.self_cold_exact)) {
+        const auto cr = engine.query(self);
+        if (!record(cr, s.self_cold, s.self_cold_exact)) {
             return s;
         }
         for (std::size_t o = 0; o < sr->self.size(); ++o) {

@@ -583,8 +583,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                               std::uint64_t count = 0;
                               test(t, u, count);
                               if (count != 0) {
-                                  // One object is one long traversal: look at the token every 4096
-                                  // tests.
+                                  // One object is one long traversal: look at the
+                                  // token every 4096 tests.
                                   const auto done =
                                       tests.fetch_add(count, std::memory_order_relaxed) + count;
                                   if ((done & 4095U) == 0) {
