@@ -662,21 +662,65 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
                            make_segment(ta[2], ta[0])};
     const Segment eb[3] = {make_segment(tb[0], tb[1]), make_segment(tb[1], tb[2]),
                            make_segment(tb[2], tb[0])};
+    // 1 / length^2 of each edge (0 for a zero-length edge), computed when a pair first needs it:
+    // the first pair tried is usually certified, so most edges never need it.
     double inv_a[3];
     double inv_b[3];
-    for (int i = 0; i < 3; ++i) {
-        inv_a[i] = ea[i].len2 > 0.0 ? 1.0 / ea[i].len2 : 0.0;
-        inv_b[i] = eb[i].len2 > 0.0 ? 1.0 / eb[i].len2 : 0.0;
+    unsigned inv_known = 0;  // bit i: inv_a[i]; bit 3 + j: inv_b[j]
+    auto inverse = [&](const Segment& e, double* inv, int bit) {
+        if ((inv_known & (1U << bit)) == 0) {
+            *inv = e.len2 > 0.0 ? 1.0 / e.len2 : 0.0;
+            inv_known |= 1U << bit;
+        }
+        return *inv;
+    };
+    // The nine edge pairs are tried in a fixed order that depends on the corners only: first the
+    // four pairs of edges meeting at the closest pair of corners (ta's corner ka, tb's corner kb;
+    // edge i runs from corner i to corner i + 1), where a closest pair ending at or near a corner
+    // is certified, then the other five in row order. The first pair Larsen's test certifies is
+    // returned, so the order only decides which of several certified pairs (equally close)
+    // gives the witness points.
+    int ka = 0;
+    int kb = 0;
+    double nearest = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k) {
+        for (int l = 0; l < 3; ++l) {
+            const double d = squared_norm(ta[k] - tb[l]);
+            if (d < nearest) {
+                nearest = d;
+                ka = k;
+                kb = l;
+            }
+        }
+    }
+    const int at_a[2] = {ka, ka == 0 ? 2 : ka - 1};
+    const int at_b[2] = {kb, kb == 0 ? 2 : kb - 1};
+    int order[9];
+    unsigned taken = 0;
+    int n_order = 0;
+    for (int x : at_a) {
+        for (int y : at_b) {
+            order[n_order++] = x * 3 + y;
+            taken |= 1U << (x * 3 + y);
+        }
+    }
+    for (int k = 0; k < 9; ++k) {
+        if ((taken & (1U << k)) == 0) {
+            order[n_order++] = k;
+        }
     }
     bool any_nearly_parallel = false;
-    for (int i = 0; i < 3; ++i) {
+    for (const int k : order) {
+        const int i = k / 3;
+        const int j = k % 3;
         const int i2 = i == 0 ? 2 : i - 1;  // ta's vertex off edge i
-        for (int j = 0; j < 3; ++j) {
-            const int j2 = j == 0 ? 2 : j - 1;
+        const int j2 = j == 0 ? 2 : j - 1;
+        {
             double s = 0.0;
             double t = 0.0;
             bool nearly_parallel = false;
-            edge_parameters(ea[i], inv_a[i], eb[j], inv_b[j], s, t, nearly_parallel);
+            edge_parameters(ea[i], inverse(ea[i], &inv_a[i], i), eb[j],
+                            inverse(eb[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
             any_nearly_parallel |= nearly_parallel;
             const Vec3 p = ea[i].p + s * ea[i].d;
             const Vec3 q = eb[j].p + t * eb[j].d;
