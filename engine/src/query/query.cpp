@@ -491,7 +491,15 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             frames = detail::OverwriteArray<EdgeFrame>(nt);
             tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
                               [&](const auto& range) {
-                                  for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                                  std::uint32_t t = range.begin();
+                                  for (; t + 4 <= range.end(); t += 4) {
+                                      const Triangle* const in[4] = {&tri[t], &tri[t + 1],
+                                                                     &tri[t + 2], &tri[t + 3]};
+                                      EdgeFrame* const out[4] = {&frames[t], &frames[t + 1],
+                                                                 &frames[t + 2], &frames[t + 3]};
+                                      edge_frames(in, out);
+                                  }
+                                  for (; t != range.end(); ++t) {
                                       frames[t] = edge_frame(tri[t]);
                                   }
                               });

@@ -7,7 +7,9 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <random>
 
@@ -339,6 +341,58 @@ TEST(CullThresholds, SlackGrowsWithTheCoordinatesMagnitude) {
     EXPECT_EQ(coordinate_scale(box), 7.5);
     EXPECT_EQ(rounding_slack(7.5), 1e-12 * 7.5);
     EXPECT_LT(rounding_slack(1.0), rounding_slack(1e6));
+}
+
+// edge_frames (four at a time, AVX2 where the processor has it) must give edge_frame's frames bit
+// for bit, branches included: slivers (plane length 0), zero-length edges (normal and extent 0),
+// a point triangle, and every lane position of each. It fails if a lane's blend, an operation's
+// order or a max's NaN rule differs from edge_frame.
+TEST(TriangleLowerBounds, FramesFourAtATimeAreEdgeFramesBitForBit) {
+    auto bits = [](double x) { return std::bit_cast<std::uint64_t>(x); };
+    auto same = [&](const EdgeFrame& a, const EdgeFrame& b) {
+        bool ok = bits(a.plane.nn) == bits(b.plane.nn) && bits(a.plane.l1l2) == bits(b.plane.l1l2) &&
+                  bits(a.reach) == bits(b.reach);
+        for (int c = 0; c < 3; ++c) {
+            ok = ok && bits(a.plane.n[c]) == bits(b.plane.n[c]) &&
+                 bits(a.centroid[c]) == bits(b.centroid[c]);
+        }
+        for (int i = 0; i < 3; ++i) {
+            ok = ok && bits(a.extent[i]) == bits(b.extent[i]);
+            for (int c = 0; c < 3; ++c) {
+                ok = ok && bits(a.normal[i][c]) == bits(b.normal[i][c]);
+            }
+        }
+        return ok;
+    };
+    std::mt19937_64 rng(41);
+    std::vector<Triangle> tris;
+    for (const double scale : {1e-6, 1.0, 1e3, 1e8}) {
+        const Vec3 base{0.3 * scale, -1.7 * scale, 1e4};
+        for (int k = 0; k < 200; ++k) {
+            tris.push_back(random_triangle(rng, base, scale));
+        }
+    }
+    const Vec3 p{1.0, 2.0, 3.0};
+    const Vec3 q{1.5, 2.0, 3.0};
+    tris.push_back({p, p, p});                                  // a point
+    tris.push_back({p, q, q});                                  // a zero-length edge
+    tris.push_back({p, q, Vec3{2.0, 2.0, 3.0}});                // collinear: no plane
+    tris.push_back({p, q, Vec3{1.25, 2.0 + 1e-12, 3.0}});       // a sliver
+    tris.push_back({p, Vec3{1.0, 2.0, 3.0 + 1e-300}, q});       // an edge below any square
+    tris.push_back({Vec3{-0.0, 0.0, -0.0}, Vec3{0.0, -0.0, 0.0}, q});  // signed zeros
+    int checked = 0;
+    for (std::size_t start = 0; start + 4 <= tris.size(); ++start) {
+        EdgeFrame got[4];
+        const Triangle* const in[4] = {&tris[start], &tris[start + 1], &tris[start + 2],
+                                       &tris[start + 3]};
+        EdgeFrame* const out[4] = {&got[0], &got[1], &got[2], &got[3]};
+        edge_frames(in, out);
+        for (int l = 0; l < 4; ++l) {
+            ASSERT_TRUE(same(got[l], edge_frame(tris[start + l]))) << "triangle " << start + l;
+            ++checked;
+        }
+    }
+    EXPECT_EQ(checked, 4 * static_cast<int>(tris.size() - 3));
 }
 
 }  // namespace
