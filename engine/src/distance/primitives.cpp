@@ -592,14 +592,13 @@ inline bool vertex_over_face(const FaceFrame& ff, const Triangle& other, const d
 // branches: when his t needs no clamping his s is already optimal for it, and when it does he
 // recomputes s the same way. inv_a / inv_e are 1 / length^2, or 0 for a zero-length edge (whose
 // parameter is then 0). Quotients that are NaN (0 / 0) clamp to 0.
-inline void edge_parameters(const Segment& sp, double inv_a, const Segment& sq, double inv_e,
-                            double& s, double& t, bool& nearly_parallel) {
-    const Vec3 r = sp.p - sq.p;
-    const double a = sp.len2;
-    const double e = sq.len2;
-    const double b = dot(sp.d, sq.d);
-    const double c = dot(sp.d, r);
-    const double f = dot(sq.d, r);
+inline void edge_parameters(const Vec3& p, const Vec3& dp, double a, double inv_a, const Vec3& q,
+                            const Vec3& dq, double e, double inv_e, double& s, double& t,
+                            bool& nearly_parallel) {
+    const Vec3 r = p - q;
+    const double b = dot(dp, dq);
+    const double c = dot(dp, r);
+    const double f = dot(dq, r);
     const double denom = a * e - b * b;
     nearly_parallel = !(denom > NEARLY_PARALLEL * a * e);
     const double s0 = clamp01((b * f - c * e) / denom);
@@ -658,18 +657,21 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
         }
     };
 
-    const Segment ea[3] = {make_segment(ta[0], ta[1]), make_segment(ta[1], ta[2]),
-                           make_segment(ta[2], ta[0])};
-    const Segment eb[3] = {make_segment(tb[0], tb[1]), make_segment(tb[1], tb[2]),
-                           make_segment(tb[2], tb[0])};
+    // Edge i of each triangle runs from corner i to corner i + 1: its direction and squared length
+    // (the corners themselves are read in place: copying them into per-edge structs cost
+    // store-forwarding stalls, a third of this function's cycles on n-body).
+    const Vec3 da[3] = {ta[1] - ta[0], ta[2] - ta[1], ta[0] - ta[2]};
+    const Vec3 db[3] = {tb[1] - tb[0], tb[2] - tb[1], tb[0] - tb[2]};
+    const double len_a[3] = {dot(da[0], da[0]), dot(da[1], da[1]), dot(da[2], da[2])};
+    const double len_b[3] = {dot(db[0], db[0]), dot(db[1], db[1]), dot(db[2], db[2])};
     // 1 / length^2 of each edge (0 for a zero-length edge), computed when a pair first needs it:
     // the first pair tried is usually certified, so most edges never need it.
     double inv_a[3];
     double inv_b[3];
     unsigned inv_known = 0;  // bit i: inv_a[i]; bit 3 + j: inv_b[j]
-    auto inverse = [&](const Segment& e, double* inv, int bit) {
+    auto inverse = [&](double len2, double* inv, int bit) {
         if ((inv_known & (1U << bit)) == 0) {
-            *inv = e.len2 > 0.0 ? 1.0 / e.len2 : 0.0;
+            *inv = len2 > 0.0 ? 1.0 / len2 : 0.0;
             inv_known |= 1U << bit;
         }
         return *inv;
@@ -719,11 +721,11 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
             double s = 0.0;
             double t = 0.0;
             bool nearly_parallel = false;
-            edge_parameters(ea[i], inverse(ea[i], &inv_a[i], i), eb[j],
-                            inverse(eb[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
+            edge_parameters(ta[i], da[i], len_a[i], inverse(len_a[i], &inv_a[i], i), tb[j], db[j],
+                            len_b[j], inverse(len_b[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
             any_nearly_parallel |= nearly_parallel;
-            const Vec3 p = ea[i].p + s * ea[i].d;
-            const Vec3 q = eb[j].p + t * eb[j].d;
+            const Vec3 p = ta[i] + s * da[i];
+            const Vec3 q = tb[j] + t * db[j];
             const Vec3 v = q - p;
             // Larsen's test (PQP's TriDist): p and q are mutually closest on their edges, so
             // each edge lies in a half-space bounded by the plane through p (resp. q) normal to
