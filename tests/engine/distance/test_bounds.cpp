@@ -350,8 +350,8 @@ TEST(CullThresholds, SlackGrowsWithTheCoordinatesMagnitude) {
 TEST(TriangleLowerBounds, FramesFourAtATimeAreEdgeFramesBitForBit) {
     auto bits = [](double x) { return std::bit_cast<std::uint64_t>(x); };
     auto same = [&](const EdgeFrame& a, const EdgeFrame& b) {
-        bool ok = bits(a.plane.nn) == bits(b.plane.nn) && bits(a.plane.l1l2) == bits(b.plane.l1l2) &&
-                  bits(a.reach) == bits(b.reach);
+        bool ok = bits(a.plane.nn) == bits(b.plane.nn) &&
+                  bits(a.plane.l1l2) == bits(b.plane.l1l2) && bits(a.reach) == bits(b.reach);
         for (int c = 0; c < 3; ++c) {
             ok = ok && bits(a.plane.n[c]) == bits(b.plane.n[c]) &&
                  bits(a.centroid[c]) == bits(b.centroid[c]);
@@ -374,11 +374,11 @@ TEST(TriangleLowerBounds, FramesFourAtATimeAreEdgeFramesBitForBit) {
     }
     const Vec3 p{1.0, 2.0, 3.0};
     const Vec3 q{1.5, 2.0, 3.0};
-    tris.push_back({p, p, p});                                  // a point
-    tris.push_back({p, q, q});                                  // a zero-length edge
-    tris.push_back({p, q, Vec3{2.0, 2.0, 3.0}});                // collinear: no plane
-    tris.push_back({p, q, Vec3{1.25, 2.0 + 1e-12, 3.0}});       // a sliver
-    tris.push_back({p, Vec3{1.0, 2.0, 3.0 + 1e-300}, q});       // an edge below any square
+    tris.push_back({p, p, p});                                         // a point
+    tris.push_back({p, q, q});                                         // a zero-length edge
+    tris.push_back({p, q, Vec3{2.0, 2.0, 3.0}});                       // collinear: no plane
+    tris.push_back({p, q, Vec3{1.25, 2.0 + 1e-12, 3.0}});              // a sliver
+    tris.push_back({p, Vec3{1.0, 2.0, 3.0 + 1e-300}, q});              // an edge below any square
     tris.push_back({Vec3{-0.0, 0.0, -0.0}, Vec3{0.0, -0.0, 0.0}, q});  // signed zeros
     int checked = 0;
     for (std::size_t start = 0; start + 4 <= tris.size(); ++start) {
