@@ -527,13 +527,16 @@ bool intersect_after_planes(const Triangle& ta, const Triangle& tb, const int sa
 bool triangles_intersect(const Triangle& ta, const Triangle& tb, Vec3* witness) {
     // Signs of each triangle's vertices against the other's plane. They are all zero against a
     // degenerate triangle, so the early-outs below never fire for one.
+    double height[3];
     const detail::PlaneSide side_a(ta[0], ta[1], ta[2]);
-    const int sb[3] = {side_a(tb[0]), side_a(tb[1]), side_a(tb[2])};
+    int sb[3];
+    side_a.corners(tb, sb, height);
     if (strictly_one_side(sb)) {
         return false;
     }
     const detail::PlaneSide side_b(tb[0], tb[1], tb[2]);
-    const int sa[3] = {side_b(ta[0]), side_b(ta[1]), side_b(ta[2])};
+    int sa[3];
+    side_b.corners(ta, sa, height);
     if (strictly_one_side(sa)) {
         return false;
     }
@@ -613,15 +616,15 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
     // the way also serve the vertex-over-face shortcut below.
     const detail::PlaneSide side_a(ta[0], ta[1], ta[2]);
     double height_b[3];
-    const int sb[3] = {side_a(tb[0], height_b[0]), side_a(tb[1], height_b[1]),
-                       side_a(tb[2], height_b[2])};
+    int sb[3];
+    side_a.corners(tb, sb, height_b);
     const bool b_one_side = strictly_one_side(sb);
     double height_a[3];
     bool a_one_side = false;
     if (!b_one_side) {
         const detail::PlaneSide side_b(tb[0], tb[1], tb[2]);
-        const int sa[3] = {side_b(ta[0], height_a[0]), side_b(ta[1], height_a[1]),
-                           side_b(ta[2], height_a[2])};
+        int sa[3];
+        side_b.corners(ta, sa, height_a);
         a_one_side = strictly_one_side(sa);
         Vec3 witness;
         if (!a_one_side && !apart && intersect_after_planes(ta, tb, sa, sb, &witness)) {

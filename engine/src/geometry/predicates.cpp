@@ -17,6 +17,12 @@
 #include <climits>
 #include <cmath>
 
+#include "cpu_features.hpp"
+
+#ifdef PROXIMA_X86_64_DISPATCH
+#include <immintrin.h>
+#endif
+
 namespace proxima {
 
 namespace {
@@ -251,6 +257,78 @@ int PlaneSide::operator()(const Vec3& x, double& height) const {
         }
     }
     return orient3d(m_a, m_b, m_c, x);
+}
+
+#ifdef PROXIMA_X86_64_DISPATCH
+namespace {
+
+// in_filter_range on four magnitudes: (m >= SAFE_LO && m <= SAFE_HI) || m == 0, NaN failing all.
+__attribute__((target("avx2"))) inline __m256d in_filter_range4(__m256d m) {
+    return _mm256_or_pd(_mm256_and_pd(_mm256_cmp_pd(m, _mm256_set1_pd(SAFE_LO), _CMP_GE_OQ),
+                                      _mm256_cmp_pd(m, _mm256_set1_pd(SAFE_HI), _CMP_LE_OQ)),
+                        _mm256_cmp_pd(m, _mm256_setzero_pd(), _CMP_EQ_OQ));
+}
+
+// PlaneSide's filter on three points in lanes 0-2 (lane 3 repeats point 0): the same operations in
+// the same order as operator() (this file is compiled with -ffp-contract=off). Returns the lanes
+// the filter decided (bit i) and leaves each lane's det in `det`.
+__attribute__((target("avx2"))) unsigned plane_filter_avx2(const Vec3& a, const Vec3& normal,
+                                                           const Vec3& minors, bool in_range,
+                                                           const std::array<Vec3, 3>& t,
+                                                           double det_out[4]) {
+    const __m256d wx =
+        _mm256_sub_pd(_mm256_set_pd(t[0].x, t[2].x, t[1].x, t[0].x), _mm256_set1_pd(a.x));
+    const __m256d wy =
+        _mm256_sub_pd(_mm256_set_pd(t[0].y, t[2].y, t[1].y, t[0].y), _mm256_set1_pd(a.y));
+    const __m256d wz =
+        _mm256_sub_pd(_mm256_set_pd(t[0].z, t[2].z, t[1].z, t[0].z), _mm256_set1_pd(a.z));
+    const __m256d det = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(wx, _mm256_set1_pd(normal.x)),
+                                                    _mm256_mul_pd(wy, _mm256_set1_pd(normal.y))),
+                                      _mm256_mul_pd(wz, _mm256_set1_pd(normal.z)));
+    _mm256_storeu_pd(det_out, det);
+    if (!in_range) {
+        return 0;
+    }
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    const __m256d ax = _mm256_andnot_pd(sign, wx);
+    const __m256d ay = _mm256_andnot_pd(sign, wy);
+    const __m256d az = _mm256_andnot_pd(sign, wz);
+    const __m256d ok = _mm256_and_pd(_mm256_and_pd(in_filter_range4(ax), in_filter_range4(ay)),
+                                     in_filter_range4(az));
+    const __m256d permanent =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, _mm256_set1_pd(minors.x)),
+                                    _mm256_mul_pd(ay, _mm256_set1_pd(minors.y))),
+                      _mm256_mul_pd(az, _mm256_set1_pd(minors.z)));
+    const __m256d errbound = _mm256_mul_pd(_mm256_set1_pd(O3D_ERRBOUND_A), permanent);
+    const __m256d decided =
+        _mm256_or_pd(_mm256_cmp_pd(det, errbound, _CMP_GE_OQ),
+                     _mm256_cmp_pd(_mm256_xor_pd(det, sign), errbound, _CMP_GE_OQ));
+    return static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(ok, decided))) & 7U;
+}
+
+// Read once at start-up (a call before this, from another file's static initializer, takes the
+// portable path: the same signs).
+const bool HAS_AVX2 = cpu_has_avx2();
+
+}  // namespace
+#endif
+
+void PlaneSide::corners(const std::array<Vec3, 3>& t, int sign[3], double height[3]) const {
+#ifdef PROXIMA_X86_64_DISPATCH
+    if (HAS_AVX2) {
+        double det[4];
+        const unsigned decided = plane_filter_avx2(m_a, m_normal, m_minors, m_in_range, t, det);
+        for (int i = 0; i < 3; ++i) {
+            height[i] = det[i];
+            sign[i] = (decided & (1U << i)) != 0 ? (det[i] > 0.0 ? -1 : (det[i] < 0.0 ? 1 : 0))
+                                                 : orient3d(m_a, m_b, m_c, t[i]);
+        }
+        return;
+    }
+#endif
+    for (int i = 0; i < 3; ++i) {
+        sign[i] = (*this)(t[i], height[i]);
+    }
 }
 
 int PlaneSide::operator()(const Vec3& x) const {

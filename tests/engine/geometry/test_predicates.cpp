@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <random>
 
 #include "proxima/geometry/predicates.hpp"
@@ -331,6 +333,7 @@ TEST(Predicates, PlaneSideMatchesOrient3d) {
         b = scale * b;
         c = scale * c;
         const detail::PlaneSide side(a, b, c);
+        std::array<Vec3, 4> xs;
         for (int k = 0; k < 4; ++k) {
             Vec3 x = a + param(rng) * (b - a) + param(rng) * (c - a);  // nearly coplanar
             if (k == 0) {
@@ -338,6 +341,7 @@ TEST(Predicates, PlaneSideMatchesOrient3d) {
             } else if (k == 3) {
                 x = scale * Vec3{coord(rng), coord(rng), coord(rng)};
             }
+            xs[k] = x;
             const int expected = orient3d(a, b, c, x);
             double height = 0.0;
             ASSERT_EQ(side(x), expected) << n << " " << k;
@@ -348,6 +352,21 @@ TEST(Predicates, PlaneSideMatchesOrient3d) {
                 EXPECT_EQ(sign_of(height), -expected) << n;
             }
             zeros += expected == 0;
+        }
+        // Three corners at once (AVX2 where the processor has it): the same signs and the same
+        // heights, bit for bit, each corner in each lane.
+        for (const std::array<Vec3, 3>& t :
+             {std::array<Vec3, 3>{xs[0], xs[1], xs[2]}, std::array<Vec3, 3>{xs[3], xs[0], xs[1]},
+              std::array<Vec3, 3>{xs[2], xs[3], xs[0]}}) {
+            int sign[3];
+            double height[3];
+            side.corners(t, sign, height);
+            for (int i = 0; i < 3; ++i) {
+                double h = 0.0;
+                ASSERT_EQ(sign[i], side(t[i], h)) << n << " " << i;
+                ASSERT_EQ(std::bit_cast<std::uint64_t>(height[i]), std::bit_cast<std::uint64_t>(h))
+                    << n << " " << i;
+            }
         }
     }
     EXPECT_GE(zeros, 2000);

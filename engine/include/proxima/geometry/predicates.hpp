@@ -29,6 +29,10 @@ class PlaneSide {
     // Also stores the floating-point value of ((b - a) x (c - a)) . (x - a), a height above the
     // plane scaled by the normal's length (its sign is -orient3d up to rounding).
     int operator()(const Vec3& x, double& height) const;
+    // The same for a triangle's three corners at once: sign[i] = (*this)(t[i], height[i]), the
+    // same signs and heights (the filter runs on the three together with AVX2 where the processor
+    // has it; undecided corners go through orient3d as above).
+    void corners(const std::array<Vec3, 3>& t, int sign[3], double height[3]) const;
 
   private:
     Vec3 m_a, m_b, m_c;
