@@ -9,6 +9,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/spin_mutex.h>
 
 #include "overwrite_array.hpp"
 #include "proxima/culling/dvd.hpp"
@@ -313,7 +314,8 @@ class SelfBests {
           m_bound(out.size()),
           m_threshold(out.size()),
           m_touching(out.size()),
-          m_exact(out.size(), std::numeric_limits<double>::infinity()) {
+          m_exact(out.size(), std::numeric_limits<double>::infinity()),
+          m_locks(out.size()) {
         for (auto& b : m_bound) {
             b.store(std::numeric_limits<double>::infinity(), std::memory_order_relaxed);
         }
@@ -346,7 +348,7 @@ class SelfBests {
         if (d_sq > bound(t)) {
             return;
         }
-        std::lock_guard<std::mutex> lock(m_locks[t % m_locks.size()]);
+        const tbb::spin_mutex::scoped_lock lock(m_locks[t]);
         SelfDistance& best = m_out[t];
         if (d_sq < m_exact[t] ||
             (d_sq == m_exact[t] && static_cast<std::int64_t>(u) < best.closest)) {
@@ -377,7 +379,10 @@ class SelfBests {
     std::vector<std::atomic<double>> m_threshold;
     std::vector<std::atomic<std::uint32_t>> m_touching;  // UINT32_MAX: not touching yet
     std::vector<double> m_exact;
-    std::array<std::mutex, 256> m_locks;
+    // One lock per triangle, a byte each: held for a few stores, so an uncontended lock is one
+    // atomic exchange (a striped std::mutex cost 5 % of n-body's self query in lock and unlock
+    // calls; its many exact ties each take the lock).
+    std::vector<tbb::spin_mutex> m_locks;
 };
 
 // One object's previous self answer (ProximityEngine::SelfMemory), per triangle.
@@ -489,20 +494,19 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // once.
             seed.assign(nt, UINT32_MAX);
             frames = detail::OverwriteArray<EdgeFrame>(nt);
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024),
-                              [&](const auto& range) {
-                                  std::uint32_t t = range.begin();
-                                  for (; t + 4 <= range.end(); t += 4) {
-                                      const Triangle* const in[4] = {&tri[t], &tri[t + 1],
-                                                                     &tri[t + 2], &tri[t + 3]};
-                                      EdgeFrame* const out[4] = {&frames[t], &frames[t + 1],
-                                                                 &frames[t + 2], &frames[t + 3]};
-                                      edge_frames(in, out);
-                                  }
-                                  for (; t != range.end(); ++t) {
-                                      frames[t] = edge_frame(tri[t]);
-                                  }
-                              });
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024), [&](const auto&
+                                                                                      range) {
+                std::uint32_t t = range.begin();
+                for (; t + 4 <= range.end(); t += 4) {
+                    const Triangle* const in[4] = {&tri[t], &tri[t + 1], &tri[t + 2], &tri[t + 3]};
+                    EdgeFrame* const out[4] = {&frames[t], &frames[t + 1], &frames[t + 2],
+                                               &frames[t + 3]};
+                    edge_frames(in, out);
+                }
+                for (; t != range.end(); ++t) {
+                    frames[t] = edge_frame(tri[t]);
+                }
+            });
             // Each pass tests one candidate per triangle; a pair both sides name, or that an
             // earlier pass named, is tested once (from the smaller index within a pass).
             auto seed_pass = [&](const std::vector<std::uint32_t>& pick, auto&& skip) {
