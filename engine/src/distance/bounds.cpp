@@ -3,6 +3,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "cpu_features.hpp"
+
+#ifdef PROXIMA_X86_64_DISPATCH
+#include <immintrin.h>
+#endif
+
 namespace proxima {
 
 namespace {
@@ -127,10 +133,10 @@ EdgeFrame edge_frame(const Triangle& a) {
     return f;
 }
 
-namespace {
+namespace detail {
 
 // The gap between b and the outside of a's edges, along a's in-plane edge normals.
-double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
+double edge_side_portable(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
     double best = 0.0;
     for (int i = 0; i < 3; ++i) {
         const Vec3& m = fa.normal[i];
@@ -154,6 +160,61 @@ double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
     }
     return best;
 }
+
+#ifdef PROXIMA_X86_64_DISPATCH
+namespace {
+
+// edge_side with b's three corners in lanes 0-2 (lane 3 repeats corner 0, which changes neither
+// "all corners clear" nor the minimum): per edge one vector of the three projections, the same
+// operations in the same order (this file is compiled with -ffp-contract=off), so the same value.
+// Whether b clears an edge is close to a coin toss on the self query's candidates: one branch per
+// edge instead of one per corner.
+__attribute__((target("avx2"))) double edge_side_avx2(const Triangle& a, const EdgeFrame& fa,
+                                                      const Triangle& b) {
+    const __m256d bx = _mm256_set_pd(b[0].x, b[2].x, b[1].x, b[0].x);
+    const __m256d by = _mm256_set_pd(b[0].y, b[2].y, b[1].y, b[0].y);
+    const __m256d bz = _mm256_set_pd(b[0].z, b[2].z, b[1].z, b[0].z);
+    double best = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const Vec3& m = fa.normal[i];
+        const Vec3& p = a[i];
+        const double floor = std::max(best, 0.0) + fa.extent[i];
+        // dot(m, b - p) for the three corners.
+        const __m256d d = _mm256_add_pd(
+            _mm256_add_pd(
+                _mm256_mul_pd(_mm256_set1_pd(m.x), _mm256_sub_pd(bx, _mm256_set1_pd(p.x))),
+                _mm256_mul_pd(_mm256_set1_pd(m.y), _mm256_sub_pd(by, _mm256_set1_pd(p.y)))),
+            _mm256_mul_pd(_mm256_set1_pd(m.z), _mm256_sub_pd(bz, _mm256_set1_pd(p.z))));
+        if (_mm256_movemask_pd(_mm256_cmp_pd(d, _mm256_set1_pd(floor), _CMP_GT_OQ)) != 0xF) {
+            continue;
+        }
+        // All above the floor, so none is NaN: the minimum of the lanes is std::min's.
+        __m128d low = _mm_min_pd(_mm256_castpd256_pd128(d), _mm256_extractf128_pd(d, 1));
+        low = _mm_min_sd(low, _mm_unpackhi_pd(low, low));
+        best = _mm_cvtsd_f64(low) - fa.extent[i];
+    }
+    return best;
+}
+
+// Read once at start-up (a call before this, from another file's static initializer, takes the
+// portable copy: the same values).
+const bool HAS_AVX2 = cpu_has_avx2();
+
+}  // namespace
+#endif
+
+double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b) {
+#ifdef PROXIMA_X86_64_DISPATCH
+    if (HAS_AVX2) {
+        return edge_side_avx2(a, fa, b);
+    }
+#endif
+    return edge_side_portable(a, fa, b);
+}
+
+}  // namespace detail
+
+namespace {
 
 // An upper bound on the largest distance from a's first corner to a corner of either triangle
 // (the largest L1 distance: no square root): the lever arm of the rounding of edge_side's
@@ -214,8 +275,8 @@ double plane_edge_from(double ha, double ab, double reach_a, double hb, double b
 
 double edge_lower_bound(const Triangle& a, const EdgeFrame& fa, const Triangle& b,
                         const EdgeFrame& fb, double slack) {
-    const double ab = edge_side(a, fa, b);
-    const double ba = edge_side(b, fb, a);
+    const double ab = detail::edge_side(a, fa, b);
+    const double ba = detail::edge_side(b, fb, a);
     return edge_bound_from(ab, side_reach(ab, a, fa, b, fb), ba, side_reach(ba, b, fb, a, fa),
                            slack);
 }
@@ -227,8 +288,8 @@ double edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
 double plane_edge_lower_bound(const Triangle& a, const Triangle& b, double slack) {
     const EdgeFrame fa = edge_frame(a);
     const EdgeFrame fb = edge_frame(b);
-    const double ab = edge_side(a, fa, b);
-    const double ba = edge_side(b, fb, a);
+    const double ab = detail::edge_side(a, fa, b);
+    const double ba = detail::edge_side(b, fb, a);
     return plane_edge_from(one_side(a, fa.plane, b), ab, side_reach(ab, a, fa, b, fb),
                            one_side(b, fb.plane, a), ba, side_reach(ba, b, fb, a, fa), slack);
 }
@@ -244,7 +305,7 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
     // is not tried after them: it pruned 1-3 % of the pairs that got that far (0.2-0.6 % of all
     // calls) and cost more than the exact tests it spared (docs/benchmarks.md, "Ideal seeds, and
     // the axis stage dropped").
-    const double ab = edge_side(a, fa, b);
+    const double ab = detail::edge_side(a, fa, b);
     const double reach_a = side_reach(ab, a, fa, b, fb);
     if (ab > 0.0) {
         const double lb_a = gap_bound(ab, reach_a, slack);
@@ -252,7 +313,7 @@ double lower_bound_until(const Triangle& a, const EdgeFrame& fa, const Triangle&
             return lb_a;
         }
     }
-    const double ba = edge_side(b, fb, a);
+    const double ba = detail::edge_side(b, fb, a);
     const double reach_b = side_reach(ba, b, fb, a, fa);
     double lb = edge_bound_from(ab, reach_a, ba, reach_b, slack);
     if (lb * lb >= threshold_sq) {

@@ -395,5 +395,54 @@ TEST(TriangleLowerBounds, FramesFourAtATimeAreEdgeFramesBitForBit) {
     EXPECT_EQ(checked, 4 * static_cast<int>(tris.size() - 3));
 }
 
+// The edge gap with b's corners in vector lanes (AVX2 where the processor has it) must equal the
+// scalar copy bit for bit: random pairs at four scales, pairs placed just beyond an edge so that
+// corners clear it or not by a few ulps, and degenerate triangles (zero normals). Fails with a
+// lane out of order, a changed comparison or a different minimum.
+TEST(TriangleLowerBounds, EdgeGapInLanesIsTheScalarGapBitForBit) {
+    auto bits = [](double x) { return std::bit_cast<std::uint64_t>(x); };
+    std::mt19937_64 rng(4242);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int positive = 0;
+    int checked = 0;
+    auto check = [&](const Triangle& a, const Triangle& b) {
+        const EdgeFrame fa = edge_frame(a);
+        const double got = detail::edge_side(a, fa, b);
+        ASSERT_EQ(bits(got), bits(detail::edge_side_portable(a, fa, b)));
+        positive += got > 0.0;
+        ++checked;
+    };
+    for (const double scale : {1e-6, 1.0, 1e3, 1e8}) {
+        const Vec3 base{0.3 * scale, -1.7 * scale, 2.5 * scale};
+        for (int k = 0; k < 500; ++k) {
+            const Triangle a = random_triangle(rng, base, scale);
+            check(a, random_triangle(rng, base, scale));
+            // b beside a's first edge, in a's plane up to a small tilt, a gap from 0 to a few ulps
+            // of the scale: its corners clear the edge or not by rounding.
+            const EdgeFrame fa = edge_frame(a);
+            const Vec3 out = fa.normal[0];
+            const double gap = unit(rng) < 0.5 ? unit(rng) * 1e-15 * scale : unit(rng) * scale;
+            const Vec3 along = a[1] - a[0];
+            Triangle b;
+            for (int c = 0; c < 3; ++c) {
+                b[c] =
+                    a[0] + unit(rng) * along + (gap + fa.extent[0] + c * unit(rng) * scale) * out;
+            }
+            check(a, b);
+            // One corner on a's edge (a's own corner): its projection equals the edge's floor
+            // exactly when the extent is that corner's, so "beyond" must be strict.
+            b[0] = a[1];
+            check(a, b);
+        }
+    }
+    const Vec3 p{1.0, 2.0, 3.0};
+    const Vec3 q{1.5, 2.0, 3.0};
+    check({p, p, p}, {q, q + Vec3{0, 1, 0}, q + Vec3{0, 0, 1}});
+    check({p, q, q}, {p + Vec3{0, 2, 0}, q + Vec3{0, 3, 0}, q + Vec3{0, 2, 1}});
+    check({p, q, Vec3{1.25, 2.0 + 1e-12, 3.0}}, {p + Vec3{0, 1, 0}, q + Vec3{0, 1, 0}, q});
+    EXPECT_EQ(checked, 6003);
+    EXPECT_GT(positive, 1000);  // the placed pairs mostly clear the edge
+}
+
 }  // namespace
 }  // namespace proxima

@@ -97,6 +97,15 @@ struct EdgeFrame {
     double reach;  // the largest L1 distance from the first corner to the others
 };
 EdgeFrame edge_frame(const Triangle& a);
+namespace detail {
+// The edge bound's one-sided gap: how far all of b lies beyond the outside of one of a's edges,
+// along that edge's in-plane normal (fa = edge_frame(a)), before rounding allowances; 0 when b
+// clears none. Runs b's three corners at once with AVX2 where the processor has it;
+// edge_side_portable is the scalar copy, the same value bit for bit (exposed for the tests).
+double edge_side(const Triangle& a, const EdgeFrame& fa, const Triangle& b);
+double edge_side_portable(const Triangle& a, const EdgeFrame& fa, const Triangle& b);
+}  // namespace detail
+
 // *out[l] = edge_frame(*in[l]) for four triangles, the same frames bit for bit (at once with AVX2
 // where the processor has it: a frame's square roots and divisions dominate its cost).
 void edge_frames(const Triangle* const in[4], EdgeFrame* const out[4]);
