@@ -304,7 +304,7 @@ Status run_separation(const Scene& scene, Culler& culler, const SweepAndPrune& s
 
 // Per-triangle best of the intra-object query, shared by the threads of one object's search.
 // The squared bound is readable without a lock (culling only needs a valid upper bound); the
-// best pair is updated under a striped lock with a deterministic tie-break (smaller distance,
+// best pair is updated under its own lock with a deterministic tie-break (smaller distance,
 // then smaller triangle index), so the answer does not depend on scheduling.
 class SelfBests {
   public:
