@@ -683,8 +683,8 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
     // four pairs of edges meeting at the closest pair of corners (ta's corner ka, tb's corner kb;
     // edge i runs from corner i to corner i + 1), where a closest pair ending at or near a corner
     // is certified, then the other five in row order. The first pair Larsen's test certifies is
-    // returned, so the order only decides which of several certified pairs (equally close)
-    // gives the witness points.
+    // returned, so the order only decides which of several certified pairs (equally close up to
+    // rounding) gives the result, and where none is, which of equally close candidates is kept.
     int ka = 0;
     int kb = 0;
     double nearest = std::numeric_limits<double>::infinity();
@@ -720,26 +720,24 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
         const int j = k % 3;
         const int i2 = i == 0 ? 2 : i - 1;  // ta's vertex off edge i
         const int j2 = j == 0 ? 2 : j - 1;
-        {
-            double s = 0.0;
-            double t = 0.0;
-            bool nearly_parallel = false;
-            edge_parameters(ta[i], da[i], len_a[i], inverse(len_a[i], &inv_a[i], i), tb[j], db[j],
-                            len_b[j], inverse(len_b[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
-            any_nearly_parallel |= nearly_parallel;
-            const Vec3 p = ta[i] + s * da[i];
-            const Vec3 q = tb[j] + t * db[j];
-            const Vec3 v = q - p;
-            // Larsen's test (PQP's TriDist): p and q are mutually closest on their edges, so
-            // each edge lies in a half-space bounded by the plane through p (resp. q) normal to
-            // v. If the third vertices lie there too, the planes separate the triangles by |v|
-            // and this pair is closest. Not trusted for nearly parallel edges, whose parameters
-            // are poorly conditioned.
-            if (!nearly_parallel && dot(ta[i2] - p, v) <= 0.0 && dot(tb[j2] - q, v) >= 0.0) {
-                return make_result(p, q);
-            }
-            consider(p, q);
+        double s = 0.0;
+        double t = 0.0;
+        bool nearly_parallel = false;
+        edge_parameters(ta[i], da[i], len_a[i], inverse(len_a[i], &inv_a[i], i), tb[j], db[j],
+                        len_b[j], inverse(len_b[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
+        any_nearly_parallel |= nearly_parallel;
+        const Vec3 p = ta[i] + s * da[i];
+        const Vec3 q = tb[j] + t * db[j];
+        const Vec3 v = q - p;
+        // Larsen's test (PQP's TriDist): p and q are mutually closest on their edges, so
+        // each edge lies in a half-space bounded by the plane through p (resp. q) normal to
+        // v. If the third vertices lie there too, the planes separate the triangles by |v|
+        // and this pair is closest. Not trusted for nearly parallel edges, whose parameters
+        // are poorly conditioned.
+        if (!nearly_parallel && dot(ta[i2] - p, v) <= 0.0 && dot(tb[j2] - q, v) >= 0.0) {
+            return make_result(p, q);
         }
+        consider(p, q);
     }
     if (any_nearly_parallel) {
         // Well-conditioned endpoint candidates where the parameters above are not (see

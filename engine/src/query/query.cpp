@@ -494,8 +494,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // once.
             seed.assign(nt, UINT32_MAX);
             frames = detail::OverwriteArray<EdgeFrame>(nt);
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024), [&](const auto&
-                                                                                      range) {
+            // Four at a time (edge_frames), the last few of a range one by one: the same frames.
+            auto fill_frames = [&](const tbb::blocked_range<std::uint32_t>& range) {
                 std::uint32_t t = range.begin();
                 for (; t + 4 <= range.end(); t += 4) {
                     const Triangle* const in[4] = {&tri[t], &tri[t + 1], &tri[t + 2], &tri[t + 3]};
@@ -506,7 +506,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 for (; t != range.end(); ++t) {
                     frames[t] = edge_frame(tri[t]);
                 }
-            });
+            };
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024), fill_frames);
             // Each pass tests one candidate per triangle; a pair both sides name, or that an
             // earlier pass named, is tested once (from the smaller index within a pass).
             auto seed_pass = [&](const std::vector<std::uint32_t>& pick, auto&& skip) {

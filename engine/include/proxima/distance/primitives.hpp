@@ -41,7 +41,8 @@ bool triangles_intersect(const Triangle& ta, const Triangle& tb, Vec3* witness =
 
 // Distance between two closed triangles with the closest points. Exactly 0 (with both points at a
 // witness of the intersection) when `triangles_intersect` says they share a point; otherwise the
-// minimum over the 6 vertex-triangle and 9 edge-edge closest pairs.
+// minimum over the 6 vertex-triangle and 9 edge-edge closest pairs (a pair certified closest may
+// be returned before the others are computed: docs/algorithms.md, Stage III).
 // `apart`: the caller has proved the triangles disjoint (a positive conservative lower bound,
 // proxima/distance/bounds.hpp), so the intersection search after the plane signs is skipped; the
 // result is bit-identical, since that search finds nothing for disjoint triangles.
