@@ -1,7 +1,9 @@
 #pragma once
 // Whether the processor runs AVX2, for the engine's hot loops that have a second copy compiled
 // for it (the CCD solver and prefilter, engine/src/ccd/elementary.cpp; the self traversal's leaf
-// rows, engine/src/culling/leaf_rows.cpp). Debian's packages are baseline x86-64, so the engine
+// rows, engine/src/culling/leaf_rows.cpp; the self query's frames and edge gap,
+// engine/src/distance/edge_frames.cpp and bounds.cpp; the plane-side filter on three corners,
+// engine/src/geometry/predicates.cpp). Debian's packages are baseline x86-64, so the engine
 // never requires AVX2: each copy computes the same IEEE operations in the same order (those files
 // are compiled with -ffp-contract=off) and the dispatch only chooses the faster one.
 

@@ -2,7 +2,6 @@
 #include "proxima/query/query.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <mutex>
 #include <unordered_map>
