@@ -3,10 +3,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <mutex>
+#include <span>
 #include <unordered_map>
 
 #include <tbb/blocked_range.h>
+#include <tbb/cache_aligned_allocator.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/spin_mutex.h>
 
@@ -305,11 +309,24 @@ Status run_separation(const Scene& scene, Culler& culler, const SweepAndPrune& s
 // The squared bound is readable without a lock (culling only needs a valid upper bound); the
 // best pair is updated under its own lock with a deterministic tie-break (smaller distance,
 // then smaller triangle index), so the answer does not depend on scheduling.
+// The skin of a rigid-reuse list (run_self): for a triangle whose closest distance is d, its list
+// holds every triangle within d + rel d + abs.
+struct Skin {
+    double rel = 0.0;
+    double abs = 0.0;
+    double of(double d) const { return rel * d + abs; }
+    bool none() const { return rel == 0.0 && abs == 0.0; }
+};
+
 class SelfBests {
   public:
-    SelfBests(std::vector<SelfDistance>& out, double slack)
+    // A `skin` widens every bound the culling reads (bounds() and threshold()) from the best
+    // distance d to d + skin.of(d), so that every pair a search leaves untested is at least that
+    // far (run_self's rigid-reuse list); the answers are the same.
+    SelfBests(std::vector<SelfDistance>& out, double slack, Skin skin = {})
         : m_out(out),
           m_slack(slack),
+          m_skin(skin),
           m_bound(out.size()),
           m_threshold(out.size()),
           m_touching(out.size()),
@@ -326,6 +343,8 @@ class SelfBests {
         }
     }
     double bound(std::uint32_t t) const { return m_bound[t].load(std::memory_order_relaxed); }
+    // The best squared distance found so far, unwidened; only between passes (no lock).
+    double best_sq(std::uint32_t t) const { return m_exact[t]; }
     // The bounds as the culler reads them (BoundLookup).
     const std::atomic<double>* bounds() const { return m_bound.data(); }
     // cull_threshold_sq of the bound, kept beside it (a square root per improvement, not per
@@ -355,8 +374,14 @@ class SelfBests {
             best.closest = u;
             best.point = p;
             best.other_point = q;
-            m_bound[t].store(d_sq, std::memory_order_relaxed);
-            m_threshold[t].store(cull_threshold_sq(d_sq, m_slack), std::memory_order_relaxed);
+            double widened = d_sq;
+            if (!m_skin.none()) {
+                const double d = std::sqrt(d_sq);
+                const double w = d + m_skin.of(d);
+                widened = w * w;
+            }
+            m_bound[t].store(widened, std::memory_order_relaxed);
+            m_threshold[t].store(cull_threshold_sq(widened, m_slack), std::memory_order_relaxed);
             if (d_sq == 0.0) {
                 m_touching[t].store(u, std::memory_order_relaxed);
             }
@@ -374,6 +399,7 @@ class SelfBests {
   private:
     std::vector<SelfDistance>& m_out;
     double m_slack;
+    Skin m_skin;
     std::vector<std::atomic<double>> m_bound;
     std::vector<std::atomic<double>> m_threshold;
     std::vector<std::atomic<std::uint32_t>> m_touching;  // UINT32_MAX: not touching yet
@@ -384,11 +410,199 @@ class SelfBests {
     std::vector<tbb::spin_mutex> m_locks;
 };
 
-// One object's previous self answer (ProximityEngine::SelfMemory), per triangle.
-struct SelfHint {
-    const std::vector<std::uint32_t>* closest = nullptr;
-    const std::vector<double>* distance = nullptr;
+// A rigid-reuse list's skin relative to each triangle's closest distance (Skin::rel). On n-body's
+// balls (closest distances ~0.04, a rigid residual of ~1e-6 per step from single-precision
+// positions) 0.5 % lists little more than the exact ties at shared vertices, which the answer
+// tests anyway, and lasts about a hundred steps (docs/benchmarks.md: 2 % listed more and was
+// slower).
+constexpr double SELF_SKIN = 0.005;
+
+// An upper bound E on how far any vertex of `to` lies from an exact rigid image of `from` (the
+// same vertices, another frame): then every point of every triangle does too (a triangle's points
+// are convex combinations of its corners), so each pair's distance differs from its distance at
+// `from` by at most 2E (a rigid motion keeps distances). The motion maps three spread vertices'
+// orthonormal frame at `from` onto theirs at `to` (any rigid motion gives a valid bound; this one
+// is exact for a rigid body); the bound adds the rounding of that rotation (its distance from an
+// orthogonal matrix, at most 3 x the largest entry of R^T R - I, times the lever arm) and of the
+// residuals' own evaluation, both far above their actual size. Infinity when the three vertices
+// do not span a plane (a degenerate object) or the positions are not finite.
+double rigid_residual_bound(const std::vector<Vec3>& from, std::span<const Vec3> to) {
+    const double inf = std::numeric_limits<double>::infinity();
+    if (from.size() != to.size() || from.size() < 3) {
+        return inf;
+    }
+    const Vec3& p0 = from[0];
+    std::size_t i1 = 0;
+    double far = -1.0;
+    for (std::size_t v = 0; v < from.size(); ++v) {
+        const double d = squared_norm(from[v] - p0);
+        if (d > far) {
+            far = d;
+            i1 = v;
+        }
+    }
+    const Vec3 axis = from[i1] - p0;
+    std::size_t i2 = 0;
+    double off = -1.0;
+    for (std::size_t v = 0; v < from.size(); ++v) {
+        const double d = squared_norm(cross(axis, from[v] - p0));
+        if (d > off) {
+            off = d;
+            i2 = v;
+        }
+    }
+    // Orthonormal frames (rows) from the same three vertices at both frames.
+    auto frame = [](const Vec3& a, const Vec3& b, const Vec3& c, Vec3 out[3]) {
+        const Vec3 e0 = b - a;
+        const Vec3 n = cross(e0, c - a);
+        const double l0 = norm(e0);
+        const double ln = norm(n);
+        if (!(l0 > 0.0) || !(ln > 0.0)) {
+            return false;
+        }
+        out[0] = (1.0 / l0) * e0;
+        out[2] = (1.0 / ln) * n;
+        out[1] = cross(out[2], out[0]);
+        return true;
+    };
+    Vec3 f0[3];
+    Vec3 f1[3];
+    if (!frame(p0, from[i1], from[i2], f0) || !frame(to[0], to[i1], to[i2], f1)) {
+        return inf;
+    }
+    // R = F1^T F0: maps f0's rows onto f1's.
+    double r[3][3];
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+            r[i][j] = f1[0][i] * f0[0][j] + f1[1][i] * f0[1][j] + f1[2][i] * f0[2][j];
+        }
+    }
+    double skew = 0.0;  // largest entry of R^T R - I
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+            const double g = r[0][i] * r[0][j] + r[1][i] * r[1][j] + r[2][i] * r[2][j];
+            skew = std::max(skew, std::abs(g - (i == j ? 1.0 : 0.0)));
+        }
+    }
+    double residual = 0.0;
+    double lever = 0.0;
+    double magnitude = 0.0;
+    for (std::size_t v = 0; v < from.size(); ++v) {
+        const Vec3 d = from[v] - p0;
+        const Vec3 image{r[0][0] * d.x + r[0][1] * d.y + r[0][2] * d.z + to[0].x,
+                         r[1][0] * d.x + r[1][1] * d.y + r[1][2] * d.z + to[0].y,
+                         r[2][0] * d.x + r[2][1] * d.y + r[2][2] * d.z + to[0].z};
+        residual = std::max(residual, norm(to[v] - image));
+        lever = std::max(lever, norm(d));
+        magnitude = std::max({magnitude, std::abs(to[v].x), std::abs(to[v].y), std::abs(to[v].z)});
+    }
+    const double bound = residual + (3.0 * skew + 1e-12) * lever + 1e-12 * magnitude;
+    return std::isfinite(bound) ? bound : inf;
+}
+
+// Every pair run_self's search tested exactly while recording a rigid-reuse list (t < u), per
+// thread.
+struct TestedPair {
+    std::uint32_t t, u;
+    double d_sq;
 };
+using TestedPairs =
+    tbb::enumerable_thread_specific<std::vector<TestedPair>,
+                                    tbb::cache_aligned_allocator<std::vector<TestedPair>>,
+                                    tbb::ets_key_per_instance>;
+
+// Rigid reuse, recording (docs/algorithms.md): one object answered by a search whose bounds were
+// widened by `skin` (SelfBests), so every pair it did not test exactly is at least the widened
+// bound apart, i.e. closest distance d + skin.of(d) (a lower bound or a box distance reached it).
+// Its list holds every tested pair within either triangle's widened distance, in both triangles'
+// lists; a tested pair left out is at least that far by its computed distance, so reach[t] =
+// d + skin.of(d) - slack (the slack covers the exact test's rounding). `margin` is the smallest
+// reach[t] - d.
+void record_list(const std::vector<SelfDistance>& answers, TestedPairs& tested, Skin skin,
+                 double slack, detail::SelfMemory& next) {
+    const std::size_t nt = answers.size();
+    next.reach.resize(nt);
+    next.margin = std::numeric_limits<double>::infinity();
+    for (std::size_t t = 0; t < nt; ++t) {
+        if (answers[t].closest == NO_OBJECT) {
+            next.reach[t] = std::numeric_limits<double>::infinity();
+            continue;
+        }
+        const double d = answers[t].distance;
+        next.reach[t] = d + skin.of(d) - slack;
+        next.margin = std::min(next.margin, next.reach[t] - d);
+    }
+    auto kept = [&](const TestedPair& p) {
+        const double d = std::sqrt(p.d_sq);
+        const double dt = answers[p.t].distance;
+        const double du = answers[p.u].distance;
+        return d < dt + skin.of(dt) || d < du + skin.of(du);
+    };
+    next.offsets.assign(nt + 1, 0);
+    for (const auto& part : tested) {
+        for (const auto& p : part) {
+            if (kept(p)) {
+                ++next.offsets[p.t + 1];
+                ++next.offsets[p.u + 1];
+            }
+        }
+    }
+    for (std::size_t t = 0; t < nt; ++t) {
+        next.offsets[t + 1] += next.offsets[t];
+    }
+    next.list.resize(next.offsets[nt]);
+    std::vector<std::uint32_t> cursor(next.offsets.begin(), next.offsets.end() - 1);
+    for (const auto& part : tested) {
+        for (const auto& p : part) {
+            if (kept(p)) {
+                next.list[cursor[p.t]++] = p.u;
+                next.list[cursor[p.u]++] = p.t;
+            }
+        }
+    }
+    next.listed = true;
+}
+
+// Rigid reuse, answering: every pair of the remembered list tested exactly at the current
+// positions (smaller index first, as brute force; the list is symmetric, so from the smaller
+// side only). True when every triangle's answer is proven: its closest distance plus the slack is
+// below its reach less twice `moved` (rigid_residual_bound), so every unlisted triangle, at least
+// that far now, is strictly farther than the answer and cannot tie it. False: `out` is partial
+// and the caller searches.
+bool reuse_list(const detail::OverwriteArray<Triangle>& tri, const detail::SelfMemory& mem,
+                double moved, double slack, Work& work, std::vector<SelfDistance>& out) {
+    const auto nt = static_cast<std::uint32_t>(out.size());
+    SelfBests bests(out, slack);
+    std::atomic<std::uint64_t> tests{0};
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, nt, 1024), [&](const auto& range) {
+        std::uint64_t count = 0;
+        for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+            for (auto k = mem.offsets[t]; k < mem.offsets[t + 1]; ++k) {
+                const std::uint32_t u = mem.list[k];
+                if (u <= t || u >= nt) {
+                    continue;
+                }
+                const auto cp = triangle_triangle(tri[t], tri[u]);
+                bests.offer(t, u, cp.squared_distance, cp.point_a, cp.point_b);
+                bests.offer(u, t, cp.squared_distance, cp.point_b, cp.point_a);
+                ++count;
+            }
+        }
+        tests += count;
+    });
+    bests.finish();
+    work.exact_tests += tests.load();
+    for (std::uint32_t t = 0; t < nt; ++t) {
+        if (std::isinf(mem.reach[t])) {
+            continue;  // no non-adjacent triangle at all: no answer, nothing outside the list
+        }
+        if (out[t].closest == NO_OBJECT ||
+            !(out[t].distance + slack < mem.reach[t] - 2.0 * moved)) {
+            return false;
+        }
+    }
+    return true;
+}
 
 // Intra-object query (seed §5.2.2): for every triangle, its closest triangle sharing no vertex.
 // With culling, one 2-ring neighbour per triangle seeds its bound (and its partner's), then the
@@ -404,32 +618,26 @@ struct SelfHint {
 // tight as a seed's. A hint is only a candidate: it is checked (in range, not adjacent) and
 // tested exactly at the current positions, so it gives an upper bound whatever happened since.
 Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result,
-                const std::vector<SelfHint>& hints) {
+                const std::vector<detail::SelfMemory*>& memory,
+                std::vector<detail::SelfMemory>& fresh) {
     const std::size_t n = scene.size();
     // Each object's answers are sized by its own task, not all first on one thread (n-body's
     // 146,480 answers are 9.4 MB).
     result.self.assign(n, {});
+    fresh.assign(n, {});
     const bool cull = culler.object_culling();
     std::vector<Status> failures(n);
+    std::atomic<std::uint64_t> reused{0};
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t a) {
         result.self[a].assign(scene[a].triangle_count(), SelfDistance{});
         if (work.should_stop()) {
             return;
         }
-        std::vector<std::uint32_t> partner;
-        if (cull) {
-            failures[a] = culler.refine_self(scene, a, partner);
-            if (!failures[a].ok()) {
-                return;
-            }
-        }
         const SceneObject& obj = scene[a];
         const MeshTopology& topo = *obj.topology;
         const auto nt = static_cast<std::uint32_t>(obj.triangle_count());
         const double slack = rounding_slack(coordinate_scale(obj.box));
-        SelfBests bests(result.self[a], slack);
         const double touching_threshold = cull_threshold_sq(0.0, slack);
-        std::atomic<std::uint64_t> tests{0};
         // Each triangle's corners, gathered once per query: a candidate pair reads two runs of
         // 72 bytes instead of six vertex lookups through the topology.
         detail::OverwriteArray<Triangle> tri(nt);
@@ -438,6 +646,64 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                 tri[t] = corners(obj, t);
             }
         });
+        detail::SelfMemory* const mem = a < memory.size() ? memory[a] : nullptr;
+        detail::SelfMemory& next = fresh[a];
+        // Rigid reuse (docs/algorithms.md): how far the object is from a rigid image of the
+        // remembered positions (infinity: nothing remembered, or no culling).
+        const double moved = cull && mem != nullptr
+                                 ? rigid_residual_bound(mem->positions, obj.vertices)
+                                 : std::numeric_limits<double>::infinity();
+        if (mem != nullptr && mem->listed && mem->offsets.size() == std::size_t{nt} + 1 &&
+            mem->reach.size() == nt && 2.0 * moved < mem->margin) {
+            if (reuse_list(tri, *mem, moved, slack, work, result.self[a])) {
+                next.positions = obj.vertices;
+                next.listed = true;
+                next.offsets = std::move(mem->offsets);
+                next.list = std::move(mem->list);
+                next.reach = std::move(mem->reach);
+                for (auto& r : next.reach) {
+                    r -= 2.0 * moved;
+                }
+                next.margin = mem->margin - 2.0 * moved;
+                next.rigid_steps = mem->rigid_steps + 1;
+                next.last_moved = moved;
+                ++reused;
+                return;
+            }
+            result.self[a].assign(nt, SelfDistance{});
+        }
+        next.positions = obj.vertices;
+        // A rigid step: the object moved by at most 1/64 of the relative skin of its mean
+        // closest distance since the last answer. After two in a row (one alone may be a frame
+        // queried twice) this answer records its list for the next frame, with a skin that also
+        // covers 16 steps as large as the last two for triangles whose closest distance is tiny.
+        bool rigid = false;
+        if (std::isfinite(moved) && mem->distance.size() == nt) {
+            double sum = 0.0;
+            std::size_t count = 0;
+            for (const double x : mem->distance) {
+                if (std::isfinite(x)) {
+                    sum += x;
+                    ++count;
+                }
+            }
+            rigid = count != 0 && 64.0 * moved * static_cast<double>(count) <= SELF_SKIN * sum;
+        }
+        next.rigid_steps = rigid ? mem->rigid_steps + 1 : 0;
+        next.last_moved = moved;
+        const bool record = rigid && mem->rigid_steps >= 1;
+        const Skin skin{SELF_SKIN,
+                        record ? 32.0 * std::max(moved, mem->last_moved) + 4.0 * slack : 0.0};
+        std::vector<std::uint32_t> partner;
+        if (cull) {
+            failures[a] = culler.refine_self(scene, a, partner);
+            if (!failures[a].ok()) {
+                return;
+            }
+        }
+        SelfBests bests(result.self[a], slack, record ? skin : Skin{});
+        std::atomic<std::uint64_t> tests{0};
+        TestedPairs tested;
         // Each triangle's edge-bound frame, once per query (filled below when culling).
         detail::OverwriteArray<EdgeFrame> frames;
         // Each triangle's seed candidates (filled below when culling): its 2-ring (or Voronoi)
@@ -481,6 +747,9 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             const auto cp = triangle_triangle(x, y, lb > 0.0);
             bests.offer(t, u, cp.squared_distance, cp.point_a, cp.point_b);
             bests.offer(u, t, cp.squared_distance, cp.point_b, cp.point_a);
+            if (record) {
+                tested.local().push_back({t, u, cp.squared_distance});
+            }
         };
 
         if (cull) {
@@ -530,12 +799,10 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
             // (same topology, so in range and non-adjacent; checked anyway). It was the closest at
             // the last positions, so under coherent motion it still is or nearly is: near-final
             // bounds before any node threshold is computed.
-            const SelfHint hint = a < hints.size() ? hints[a] : SelfHint{};
-            if (hint.closest != nullptr && hint.distance != nullptr && hint.closest->size() == nt &&
-                hint.distance->size() == nt) {
+            if (mem != nullptr && mem->closest.size() == nt && mem->distance.size() == nt) {
                 warm.assign(nt, UINT32_MAX);
                 for (std::uint32_t t = 0; t < nt; ++t) {
-                    const std::uint32_t u = (*hint.closest)[t];
+                    const std::uint32_t u = mem->closest[t];
                     if (u < nt && u != t && !topo.adjacent(t, u)) {
                         warm[t] = u;
                     }
@@ -559,8 +826,8 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                             continue;
                         }
                         if (!warm.empty() && warm[t] != UINT32_MAX) {
-                            const double last = 2.0 * (*hint.distance)[t];
-                            if (bests.bound(t) <= last * last) {
+                            const double last = 2.0 * mem->distance[t];
+                            if (bests.best_sq(t) <= last * last) {
                                 continue;
                             }
                         }
@@ -606,7 +873,11 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                           });
         bests.finish();
         work.exact_tests += tests.load();
+        if (record && cull && !work.stopped.load()) {
+            record_list(result.self[a], tested, skin, slack, next);
+        }
     });
+    result.stats.self_objects_reused = reused.load();
     for (auto& f : failures) {
         if (!f.ok()) {
             return f;
@@ -909,34 +1180,39 @@ StatusOr<QueryResult> ProximityEngine::query(const QueryRequest& request,
     }
     if (request.self) {
         t0 = Clock::now();
-        std::vector<SelfHint> hints(m_scene.size());
+        std::vector<detail::SelfMemory*> memory_in(m_scene.size(), nullptr);
         for (std::size_t a = 0; a < m_scene.size(); ++a) {
             const auto it = m_self_memory.find(m_scene[a].id);
             if (it != m_self_memory.end() &&
                 it->second.topology_version == m_scene[a].topology_version) {
-                hints[a] = {&it->second.closest, &it->second.distance};
+                memory_in[a] = &it->second;
             }
         }
-        if (Status s = run_self(m_scene, culler, work, result, hints); !s.ok()) {
+        std::vector<detail::SelfMemory> fresh;
+        if (Status s = run_self(m_scene, culler, work, result, memory_in, fresh); !s.ok()) {
+            // A list run_self moved out is gone: forget the memory rather than keep half of it.
+            m_self_memory.clear();
             return s;
         }
         if (!work.stopped.load()) {
             // Remember this answer for the next frame; objects no longer in the scene are dropped.
             // An object's previous arrays are reused (no allocation on a stream of frames), and
             // the objects are copied in parallel.
-            std::unordered_map<ObjectId, SelfMemory> memory;
+            std::unordered_map<ObjectId, detail::SelfMemory> memory;
             memory.reserve(m_scene.size());
-            std::vector<SelfMemory*> slots(m_scene.size());
+            std::vector<detail::SelfMemory*> slots(m_scene.size());
             for (std::size_t a = 0; a < m_scene.size(); ++a) {
-                SelfMemory& m = memory[m_scene[a].id];
+                detail::SelfMemory& m = memory[m_scene[a].id];
+                m = std::move(fresh[a]);
                 if (auto old = m_self_memory.find(m_scene[a].id); old != m_self_memory.end()) {
-                    m = std::move(old->second);
+                    m.closest.swap(old->second.closest);  // reused as buffers
+                    m.distance.swap(old->second.distance);
                 }
                 m.topology_version = m_scene[a].topology_version;
                 slots[a] = &m;
             }
             tbb::parallel_for(std::size_t{0}, m_scene.size(), [&](std::size_t a) {
-                SelfMemory& m = *slots[a];
+                detail::SelfMemory& m = *slots[a];
                 const auto& answers = result.self[a];
                 m.closest.resize(answers.size());
                 m.distance.resize(answers.size());

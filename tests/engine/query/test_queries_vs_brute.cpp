@@ -517,5 +517,106 @@ TEST(QueriesVsBrute, WarmSelfFramesEqualBruteForceAndCold) {
     }
 }
 
+// Rigid reuse (docs/algorithms.md): an object that moved rigidly answers its self query from a
+// candidate list recorded by an earlier answer, guarded by a bound on how far it is from a rigid
+// image of the positions the list was made at. Through one engine, objects move rigidly (a fresh
+// rotation and translation of their first positions every frame, rounded to single precision as
+// a simulator's positions are, so the motion is rigid only up to ~1e-7), then one is deformed a
+// little, one has a single vertex pulled across the object (a fold no list can foresee), and
+// they move rigidly again for long enough to spend some lists' margins. Every frame's self answer
+// must equal brute force bit for bit, and most frames must have answered objects from their
+// lists (else this would test nothing new).
+TEST(QueriesVsBrute, RigidFramesReuseTheirListsAndEqualBruteForce) {
+    QueryRequest self_only;
+    self_only.separation = false;
+    self_only.self = true;
+    self_only.culler = CullerKind::bvh;
+    const std::uint64_t scenes = test::SANITIZED ? 2 : 6;
+    const int frames = test::SANITIZED ? 14 : 30;
+    for (std::uint64_t seed = 70000; seed < 70000 + scenes; ++seed) {
+        Rng rng(seed);
+        ProximityEngine bvh;
+        std::vector<NamedMesh> meshes = test::random_scene(rng);
+        meshes.push_back({"many", many_components(rng, 8)});
+        meshes.push_back({"grid", test::sheet(rng, 12, 12, 0.0)});  // exact ties everywhere
+        for (const auto& m : meshes) {
+            ASSERT_TRUE(bvh.scene().add_object(m).ok());
+        }
+        std::vector<std::vector<Vec3>> rest;
+        for (const auto& o : bvh.scene().objects()) {
+            rest.push_back(o.vertices);
+        }
+        std::uint64_t reused = 0;
+        for (int frame = 0; frame < frames; ++frame) {
+            SceneUpdate update;
+            for (std::size_t i = 0; i < bvh.scene().size(); ++i) {
+                const SceneObject& o = bvh.scene()[i];
+                // A rotation about a random axis through the origin, then a translation.
+                Vec3 axis{test::uniform(rng, -1, 1), test::uniform(rng, -1, 1),
+                          test::uniform(rng, -1, 1)};
+                axis = (1.0 / std::max(norm(axis), 1e-9)) * axis;
+                const double angle = test::uniform(rng, -3.0, 3.0);
+                const Vec3 shift{test::uniform(rng, -5, 5), test::uniform(rng, -5, 5),
+                                 test::uniform(rng, -5, 5)};
+                const double c = std::cos(angle);
+                const double sn = std::sin(angle);
+                std::vector<Vec3> v(rest[i].size());
+                for (std::size_t k = 0; k < v.size(); ++k) {
+                    const Vec3& p = rest[i][k];
+                    // Rodrigues' formula.
+                    const Vec3 r = c * p + sn * cross(axis, p) + (1.0 - c) * dot(axis, p) * axis;
+                    const Vec3 moved = r + shift;
+                    v[k] = {static_cast<float>(moved.x), static_cast<float>(moved.y),
+                            static_cast<float>(moved.z)};
+                }
+                if (frame == 10 && i == 0) {
+                    v = test::jitter(rng, v, 1e-3);  // a small deformation
+                }
+                if (frame == 12 && i + 1 == bvh.scene().size() && v.size() > 2) {
+                    v[0] = v[v.size() / 2] + Vec3{1e-4, 1e-4, 1e-4};  // a fold
+                }
+                update.positions.push_back({o.id, std::move(v)});
+            }
+            ASSERT_TRUE(bvh.scene().apply(std::move(update)).ok());
+            const std::string where =
+                "seed " + std::to_string(seed) + " frame " + std::to_string(frame);
+            auto warm = bvh.query(self_only);
+            ASSERT_TRUE(warm.ok());
+            reused += warm->stats.self_objects_reused;
+            ProximityEngine brute;
+            for (const auto& o : bvh.scene().objects()) {
+                ASSERT_TRUE(
+                    brute.scene().add_object({o.name, {o.vertices, o.topology->triangles()}}).ok());
+            }
+            QueryRequest brute_self = self_only;
+            brute_self.culler = CullerKind::brute;
+            auto b = brute.query(brute_self);
+            ASSERT_TRUE(b.ok());
+            ASSERT_EQ(warm->self.size(), b->self.size()) << where;
+            for (std::size_t i = 0; i < warm->self.size(); ++i) {
+                ASSERT_EQ(warm->self[i].size(), b->self[i].size()) << where;
+                for (std::size_t t = 0; t < warm->self[i].size(); ++t) {
+                    const auto& x = warm->self[i][t];
+                    const auto& y = b->self[i][t];
+                    // Bit for bit: the same triangle (ties go to the smaller index) and value.
+                    ASSERT_TRUE(x.closest == y.closest && x.distance == y.distance &&
+                                x.point == y.point && x.other_point == y.other_point)
+                        << where << " object " << i << " triangle " << t << ": " << x.closest << " "
+                        << x.distance << " vs brute " << y.closest << " " << y.distance;
+                }
+            }
+            EXPECT_LE(warm->stats.exact_tests, b->stats.exact_tests + bvh.scene().triangle_count())
+                << where;
+            if (HasFailure()) {
+                return;
+            }
+        }
+        // Lists are recorded on the second rigid step and used from the third on, except after
+        // the deformation and the fold: at least half of all object-frames.
+        EXPECT_GE(reused, bvh.scene().size() * static_cast<std::size_t>(frames) / 2)
+            << "seed " << seed;
+    }
+}
+
 }  // namespace
 }  // namespace proxima

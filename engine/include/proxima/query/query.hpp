@@ -90,6 +90,9 @@ struct QueryStats {
     std::uint64_t brute_force_tests = 0;
     std::uint64_t object_pairs_tested = 0;
     std::uint64_t pns_pairs = 0;
+    // Objects whose self answer came from their candidate list because they moved rigidly
+    // (docs/algorithms.md, "Rigid reuse"), not from a search.
+    std::uint64_t self_objects_reused = 0;
     // Discrete-Voronoi culler (zero for the others): Stage II seconds (sampling, buckets, kernel,
     // bounds), the kernel alone, kernel samples, grid cell size, candidate pairs removed by the
     // Voronoi lower bounds, and the largest kernel error allowance used.
@@ -112,6 +115,29 @@ struct QueryResult {
 
 // Owns a scene and the culling state that persists between frames (refitted hierarchies, the
 // sorted intervals of Stage I), so a simulator's frames reuse work.
+namespace detail {
+// One object's last self answer (closest triangle per triangle, UINT32_MAX for none), with the
+// topology it was computed on, and what a rigidly moving object needs to answer its next frame
+// from a list instead of a search (run_self in query.cpp, docs/algorithms.md "Rigid reuse"):
+// the positions the answer was computed at and, when `listed`, each triangle t's candidates
+// list[offsets[t], offsets[t + 1]) with a reach: every non-adjacent triangle outside t's list is
+// at least reach[t] from t at `positions` (infinity: t has no non-adjacent triangle).
+struct SelfMemory {
+    std::uint64_t topology_version = 0;
+    std::vector<std::uint32_t> closest;  // per triangle; UINT32_MAX: none
+    std::vector<double> distance;        // to it
+    std::vector<Vec3> positions;
+    bool listed = false;
+    std::vector<std::uint32_t> offsets;  // triangle_count + 1
+    std::vector<std::uint32_t> list;     // symmetric: u in t's list exactly when t is in u's
+    std::vector<double> reach;
+    double margin = 0.0;  // the smallest reach[t] - distance[t]
+    // Rigid steps in a row up to this answer, and the last step's rigid_residual_bound.
+    std::uint32_t rigid_steps = 0;
+    double last_moved = std::numeric_limits<double>::infinity();
+};
+}  // namespace detail
+
 class ProximityEngine {
   public:
     ProximityEngine();
@@ -166,14 +192,9 @@ class ProximityEngine {
     std::array<AutoModel, 32> m_auto{};
     SweepAndPrune m_sap;
     std::uint64_t m_sap_generation = ~0ull;
-    // The last self answer per object (closest triangle per triangle, UINT32_MAX for none), with
-    // the topology it was computed on: hints only, every one is checked and tested again.
-    struct SelfMemory {
-        std::uint64_t topology_version = 0;
-        std::vector<std::uint32_t> closest;  // per triangle; UINT32_MAX: none
-        std::vector<double> distance;        // to it
-    };
-    std::unordered_map<ObjectId, SelfMemory> m_self_memory;
+    // The last self answer per object (detail::SelfMemory): hints and a candidate list, every one
+    // checked and tested again.
+    std::unordered_map<ObjectId, detail::SelfMemory> m_self_memory;
 };
 
 // Number of unordered non-adjacent triangle pairs within one object (brute-force work of a
