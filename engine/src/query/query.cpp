@@ -421,20 +421,24 @@ constexpr double SELF_SKIN = 0.005;
 // same vertices, another frame): then every point of every triangle does too (a triangle's points
 // are convex combinations of its corners), so each pair's distance differs from its distance at
 // `from` by at most 2E (a rigid motion keeps distances). The motion maps three spread vertices'
-// orthonormal frame at `from` onto theirs at `to` (any rigid motion gives a valid bound; this one
-// is exact for a rigid body); the bound adds the rounding of that rotation (its distance from an
-// orthogonal matrix, at most 3 x the largest entry of R^T R - I, times the lever arm) and of the
-// residuals' own evaluation, both far above their actual size. Infinity when the three vertices
-// do not span a plane (a degenerate object) or the positions are not finite.
-double rigid_residual_bound(const std::vector<Vec3>& from, std::span<const Vec3> to) {
+// orthonormal frame at `from` onto theirs at `to` (the first vertex, then among up to 64 evenly
+// spaced ones the farthest from it and the farthest from their line; any rigid motion gives a
+// valid bound, this one is exact for a rigid body); the bound adds the rounding of that rotation
+// (its distance from an orthogonal matrix, at most 3 x the largest entry of R^T R - I, times the
+// lever arm) and of the residuals' own evaluation, both far above their actual size. Infinity
+// when a vertex is already more than `limit` from its image (a deforming object: the caller only
+// uses bounds below its limit, and the scan stops there), when the three vertices do not span a
+// plane, or when the positions are not finite.
+double rigid_residual_bound(const std::vector<Vec3>& from, std::span<const Vec3> to, double limit) {
     const double inf = std::numeric_limits<double>::infinity();
-    if (from.size() != to.size() || from.size() < 3) {
+    if (from.size() != to.size() || from.size() < 3 || !(limit > 0.0)) {
         return inf;
     }
+    const std::size_t stride = std::max<std::size_t>(1, from.size() / 64);
     const Vec3& p0 = from[0];
     std::size_t i1 = 0;
     double far = -1.0;
-    for (std::size_t v = 0; v < from.size(); ++v) {
+    for (std::size_t v = 0; v < from.size(); v += stride) {
         const double d = squared_norm(from[v] - p0);
         if (d > far) {
             far = d;
@@ -444,7 +448,7 @@ double rigid_residual_bound(const std::vector<Vec3>& from, std::span<const Vec3>
     const Vec3 axis = from[i1] - p0;
     std::size_t i2 = 0;
     double off = -1.0;
-    for (std::size_t v = 0; v < from.size(); ++v) {
+    for (std::size_t v = 0; v < from.size(); v += stride) {
         const double d = squared_norm(cross(axis, from[v] - p0));
         if (d > off) {
             off = d;
@@ -484,19 +488,25 @@ double rigid_residual_bound(const std::vector<Vec3>& from, std::span<const Vec3>
             skew = std::max(skew, std::abs(g - (i == j ? 1.0 : 0.0)));
         }
     }
-    double residual = 0.0;
-    double lever = 0.0;
+    // Squared residuals and lever arms (one square root each at the end).
+    const double limit_sq = limit * limit;
+    double residual_sq = 0.0;
+    double lever_sq = 0.0;
     double magnitude = 0.0;
     for (std::size_t v = 0; v < from.size(); ++v) {
         const Vec3 d = from[v] - p0;
         const Vec3 image{r[0][0] * d.x + r[0][1] * d.y + r[0][2] * d.z + to[0].x,
                          r[1][0] * d.x + r[1][1] * d.y + r[1][2] * d.z + to[0].y,
                          r[2][0] * d.x + r[2][1] * d.y + r[2][2] * d.z + to[0].z};
-        residual = std::max(residual, norm(to[v] - image));
-        lever = std::max(lever, norm(d));
+        residual_sq = std::max(residual_sq, squared_norm(to[v] - image));
+        if (!(residual_sq <= limit_sq)) {
+            return inf;  // also NaN
+        }
+        lever_sq = std::max(lever_sq, squared_norm(d));
         magnitude = std::max({magnitude, std::abs(to[v].x), std::abs(to[v].y), std::abs(to[v].z)});
     }
-    const double bound = residual + (3.0 * skew + 1e-12) * lever + 1e-12 * magnitude;
+    const double bound =
+        std::sqrt(residual_sq) + (3.0 * skew + 1e-12) * std::sqrt(lever_sq) + 1e-12 * magnitude;
     return std::isfinite(bound) ? bound : inf;
 }
 
@@ -649,10 +659,24 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         detail::SelfMemory* const mem = a < memory.size() ? memory[a] : nullptr;
         detail::SelfMemory& next = fresh[a];
         // Rigid reuse (docs/algorithms.md): how far the object is from a rigid image of the
-        // remembered positions (infinity: nothing remembered, or no culling).
-        const double moved = cull && mem != nullptr
-                                 ? rigid_residual_bound(mem->positions, obj.vertices)
-                                 : std::numeric_limits<double>::infinity();
+        // remembered positions (infinity: nothing remembered, no culling, or farther than any
+        // use below allows: a list's half margin, or a rigid step's 1/64 of the relative skin of
+        // the mean closest distance).
+        double moved = std::numeric_limits<double>::infinity();
+        double rigid_limit = 0.0;
+        if (cull && mem != nullptr && mem->distance.size() == nt) {
+            double sum = 0.0;
+            std::size_t count = 0;
+            for (const double x : mem->distance) {
+                if (std::isfinite(x)) {
+                    sum += x;
+                    ++count;
+                }
+            }
+            rigid_limit = count == 0 ? 0.0 : SELF_SKIN * sum / (64.0 * static_cast<double>(count));
+            const double limit = std::max(rigid_limit, mem->listed ? 0.5 * mem->margin : 0.0);
+            moved = rigid_residual_bound(mem->positions, obj.vertices, limit);
+        }
         if (mem != nullptr && mem->listed && mem->offsets.size() == std::size_t{nt} + 1 &&
             mem->reach.size() == nt && 2.0 * moved < mem->margin) {
             if (reuse_list(tri, *mem, moved, slack, work, result.self[a])) {
@@ -677,18 +701,7 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         // closest distance since the last answer. After two in a row (one alone may be a frame
         // queried twice) this answer records its list for the next frame, with a skin that also
         // covers 16 steps as large as the last two for triangles whose closest distance is tiny.
-        bool rigid = false;
-        if (std::isfinite(moved) && mem->distance.size() == nt) {
-            double sum = 0.0;
-            std::size_t count = 0;
-            for (const double x : mem->distance) {
-                if (std::isfinite(x)) {
-                    sum += x;
-                    ++count;
-                }
-            }
-            rigid = count != 0 && 64.0 * moved * static_cast<double>(count) <= SELF_SKIN * sum;
-        }
+        const bool rigid = moved <= rigid_limit;
         next.rigid_steps = rigid ? mem->rigid_steps + 1 : 0;
         next.last_moved = moved;
         const bool record = rigid && mem->rigid_steps >= 1;
