@@ -627,6 +627,9 @@ bool reuse_list(const detail::OverwriteArray<Triangle>& tri, const detail::SelfM
 // twice the distance), the 2-ring seed is not searched for: the remembered pair's bound is as
 // tight as a seed's. A hint is only a candidate: it is checked (in range, not adjacent) and
 // tested exactly at the current positions, so it gives an upper bound whatever happened since.
+// `memory[a]` (null: none) is also where an object that moved rigidly finds its candidate list
+// (rigid reuse: reuse_list, record_list); `fresh[a]` receives what object a's next frame needs
+// (positions, list), the caller adds the answers.
 Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& result,
                 const std::vector<detail::SelfMemory*>& memory,
                 std::vector<detail::SelfMemory>& fresh) {
