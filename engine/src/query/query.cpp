@@ -305,10 +305,6 @@ Status run_separation(const Scene& scene, Culler& culler, const SweepAndPrune& s
     return {};
 }
 
-// Per-triangle best of the intra-object query, shared by the threads of one object's search.
-// The squared bound is readable without a lock (culling only needs a valid upper bound); the
-// best pair is updated under its own lock with a deterministic tie-break (smaller distance,
-// then smaller triangle index), so the answer does not depend on scheduling.
 // The skin of a rigid-reuse list (run_self): for a triangle whose closest distance is d, its list
 // holds every triangle within d + rel d + abs.
 struct Skin {
@@ -318,6 +314,10 @@ struct Skin {
     bool none() const { return rel == 0.0 && abs == 0.0; }
 };
 
+// Per-triangle best of the intra-object query, shared by the threads of one object's search.
+// The squared bound is readable without a lock (culling only needs a valid upper bound); the
+// best pair is updated under its own lock with a deterministic tie-break (smaller distance,
+// then smaller triangle index), so the answer does not depend on scheduling.
 class SelfBests {
   public:
     // A `skin` widens every bound the culling reads (bounds() and threshold()) from the best

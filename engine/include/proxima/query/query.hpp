@@ -113,8 +113,6 @@ struct QueryResult {
     QueryStats stats;
 };
 
-// Owns a scene and the culling state that persists between frames (refitted hierarchies, the
-// sorted intervals of Stage I), so a simulator's frames reuse work.
 namespace detail {
 // One object's last self answer (closest triangle per triangle, UINT32_MAX for none), with the
 // topology it was computed on, and what a rigidly moving object needs to answer its next frame
@@ -138,6 +136,8 @@ struct SelfMemory {
 };
 }  // namespace detail
 
+// Owns a scene and the culling state that persists between frames (refitted hierarchies, the
+// sorted intervals of Stage I), so a simulator's frames reuse work.
 class ProximityEngine {
   public:
     ProximityEngine();
