@@ -745,15 +745,22 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
         return s;
     }
 
+    // The t0 objects into an engine (false: one was refused, s.skipped says why).
+    auto add_objects = [&](ProximityEngine& e) {
+        for (std::size_t c = 0; c < pair->t0.size(); ++c) {
+            auto id = e.scene().add_object(
+                {goal.label + std::string(".") + std::to_string(c), pair->t0[c]});
+            if (!id.ok()) {
+                s.skipped = id.status().to_string();
+                return false;
+            }
+        }
+        return true;
+    };
     ProximityEngine engine;
     const auto load_start = Clock::now();
-    for (std::size_t c = 0; c < pair->t0.size(); ++c) {
-        auto id = engine.scene().add_object(
-            {goal.label + std::string(".") + std::to_string(c), pair->t0[c]});
-        if (!id.ok()) {
-            s.skipped = id.status().to_string();
-            return s;
-        }
+    if (!add_objects(engine)) {
+        return s;
     }
     const double load = seconds_since(load_start);
     s.objects = engine.scene().size();
@@ -762,13 +769,8 @@ RealSummary run_real(const RealGoal& goal, const Options& opt, std::vector<std::
     // stream's engine keeps what a real stream keeps between frames (the last answer and, for a
     // rigidly moving object, its candidate list), so its warm frames are a stream's.
     ProximityEngine cold_engine;
-    for (std::size_t c = 0; c < pair->t0.size(); ++c) {
-        auto id = cold_engine.scene().add_object(
-            {goal.label + std::string(".") + std::to_string(c), pair->t0[c]});
-        if (!id.ok()) {
-            s.skipped = id.status().to_string();
-            return s;
-        }
+    if (!add_objects(cold_engine)) {
+        return s;
     }
     QueryRequest separation;
     separation.separation = true;

@@ -428,6 +428,25 @@ TEST(QueriesVsBrute, ManyComponentsInOneObject) {
     }
 }
 
+// Two self answers for the same scene state, bit for bit: the same closest triangle (ties go to
+// the smaller index), distance and points for every triangle.
+void expect_same_self(const QueryResult& a, const char* a_name, const QueryResult& b,
+                      const char* b_name, const std::string& where) {
+    ASSERT_EQ(a.self.size(), b.self.size()) << where;
+    for (std::size_t i = 0; i < a.self.size(); ++i) {
+        ASSERT_EQ(a.self[i].size(), b.self[i].size()) << where;
+        for (std::size_t t = 0; t < a.self[i].size(); ++t) {
+            const auto& x = a.self[i][t];
+            const auto& y = b.self[i][t];
+            EXPECT_TRUE(x.closest == y.closest && x.distance == y.distance && x.point == y.point &&
+                        x.other_point == y.other_point)
+                << where << " object " << i << " triangle " << t << ": " << a_name << " "
+                << x.closest << " " << x.distance << ", " << b_name << " " << y.closest << " "
+                << y.distance;
+        }
+    }
+}
+
 // Frame-to-frame coherence (warm self queries seed each triangle with its previous closest
 // triangle): through one engine, every frame's self answer equals brute force and, bit for bit,
 // the same engine's cold answer (forget_coherence). The frames cover what can make a remembered
@@ -498,18 +517,7 @@ TEST(QueriesVsBrute, WarmSelfFramesEqualBruteForceAndCold) {
             bvh.forget_coherence();
             auto cold = bvh.query(self_only);
             ASSERT_TRUE(cold.ok());
-            ASSERT_EQ(warm->self.size(), cold->self.size()) << where;
-            for (std::size_t i = 0; i < warm->self.size(); ++i) {
-                ASSERT_EQ(warm->self[i].size(), cold->self[i].size()) << where;
-                for (std::size_t t = 0; t < warm->self[i].size(); ++t) {
-                    const auto& w = warm->self[i][t];
-                    const auto& c = cold->self[i][t];
-                    EXPECT_TRUE(w.closest == c.closest && w.distance == c.distance &&
-                                w.point == c.point && w.other_point == c.other_point)
-                        << where << " object " << i << " triangle " << t << ": warm " << w.closest
-                        << " " << w.distance << " cold " << c.closest << " " << c.distance;
-                }
-            }
+            expect_same_self(warm.value(), "warm", cold.value(), "cold", where);
             if (HasFailure()) {
                 return;
             }
@@ -592,19 +600,7 @@ TEST(QueriesVsBrute, RigidFramesReuseTheirListsAndEqualBruteForce) {
             brute_self.culler = CullerKind::brute;
             auto b = brute.query(brute_self);
             ASSERT_TRUE(b.ok());
-            ASSERT_EQ(warm->self.size(), b->self.size()) << where;
-            for (std::size_t i = 0; i < warm->self.size(); ++i) {
-                ASSERT_EQ(warm->self[i].size(), b->self[i].size()) << where;
-                for (std::size_t t = 0; t < warm->self[i].size(); ++t) {
-                    const auto& x = warm->self[i][t];
-                    const auto& y = b->self[i][t];
-                    // Bit for bit: the same triangle (ties go to the smaller index) and value.
-                    ASSERT_TRUE(x.closest == y.closest && x.distance == y.distance &&
-                                x.point == y.point && x.other_point == y.other_point)
-                        << where << " object " << i << " triangle " << t << ": " << x.closest << " "
-                        << x.distance << " vs brute " << y.closest << " " << y.distance;
-                }
-            }
+            expect_same_self(warm.value(), "warm", b.value(), "brute", where);
             EXPECT_LE(warm->stats.exact_tests, b->stats.exact_tests + bvh.scene().triangle_count())
                 << where;
             if (HasFailure()) {
