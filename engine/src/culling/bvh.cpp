@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <numeric>
 
+#include <tbb/parallel_invoke.h>
+
 #include "proxima/culling/bvh_build.hpp"
 
 namespace proxima {
@@ -18,42 +20,93 @@ void Bvh::compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopol
 
 namespace {
 
+double half_area(const Aabb& b) {
+    const Vec3 e = b.extent();
+    return e.x * e.y + e.y * e.z + e.z * e.x;
+}
+
+// Ranges at least this large split their two halves into parallel tasks.
+constexpr std::uint32_t PARALLEL_RANGE = 4096;
+
 struct Builder {
     std::vector<Bvh::Node>& nodes;
     std::vector<std::uint32_t>& order;
-    const std::vector<Aabb>& boxes;
-    std::vector<Vec3> centers;
+    // Triangle box centres, one array per axis.
+    std::vector<double> centre[3];
 
-    // Recursion depth is log2(n / LEAF_SIZE) because every split is at the median: safe.
-    std::uint32_t build(std::uint32_t begin, std::uint32_t end) {
-        const auto index = static_cast<std::uint32_t>(nodes.size());
-        nodes.emplace_back();
-        Aabb box;
-        Aabb cbox;
-        for (auto i = begin; i < end; ++i) {
-            box.extend(boxes[order[i]]);
-            cbox.extend(centers[order[i]]);
-        }
-        nodes[index].box = box;
+    // Nodes of the subtree over `count` triangles: every split is at the middle slot, so the
+    // layout depends on the count alone.
+    static std::uint32_t subtree_nodes(std::uint32_t count) {
+        return count <= Bvh::LEAF_SIZE
+                   ? 1
+                   : 1 + subtree_nodes(count / 2) + subtree_nodes(count - count / 2);
+    }
+
+    // Node `index` over slots [begin, end), its subtree at the following indices (pre-order:
+    // left child index + 1, right child after the left subtree); boxes are set afterwards
+    // (Bvh::build). Recursion depth is log2(n / LEAF_SIZE) because every split is at the
+    // median: safe.
+    void build(std::uint32_t index, std::uint32_t begin, std::uint32_t end) {
+        Bvh::Node& node = nodes[index];
         const auto count = end - begin;
         if (count <= Bvh::LEAF_SIZE) {
-            nodes[index].first = begin;
-            nodes[index].count = count;
-            return index;
+            node.first = begin;
+            node.count = count;
+            return;
+        }
+        Aabb cbox;
+        for (auto i = begin; i < end; ++i) {
+            const auto t = order[i];
+            cbox.extend(Vec3{centre[0][t], centre[1][t], centre[2][t]});
         }
         // Median split on the longest axis of the centre bounds: balanced trees keep refitted
-        // boxes reasonably tight under deformation, and coincident centres still split.
-        const auto mid = bvh_build::split_at_median<bvh_build::Ties::unordered>(
-            order, begin, end, cbox, [&](std::uint32_t t) -> const Vec3& { return centers[t]; });
-        build(begin, mid);  // left child is index + 1
-        const auto right = build(mid, end);
-        nodes[index].first = right;
-        nodes[index].count = 0;
-        return index;
+        // boxes reasonably tight under deformation, and coincident centres still split. The
+        // partition runs on (centre, triangle) pairs side by side, compared by centre alone: the
+        // same comparisons, so the same order, as split_at_median on the slots.
+        const int axis = bvh_build::longest_axis(cbox);
+        const std::uint32_t mid = begin + count / 2;
+        std::vector<std::pair<double, std::uint32_t>> keyed(count);
+        for (std::uint32_t i = 0; i < count; ++i) {
+            const auto t = order[begin + i];
+            keyed[i] = {centre[axis][t], t};
+        }
+        std::nth_element(keyed.begin(), keyed.begin() + (mid - begin), keyed.end(),
+                         [](const auto& a, const auto& b) { return a.first < b.first; });
+        for (std::uint32_t i = 0; i < count; ++i) {
+            order[begin + i] = keyed[i].second;
+        }
+        const auto right = index + 1 + subtree_nodes(mid - begin);
+        node.first = right;
+        node.count = 0;
+        // The halves touch disjoint slots and nodes: the same tree whichever runs first.
+        if (count >= PARALLEL_RANGE) {
+            tbb::parallel_invoke([&] { build(index + 1, begin, mid); },
+                                 [&] { build(right, mid, end); });
+        } else {
+            build(index + 1, begin, mid);
+            build(right, mid, end);
+        }
     }
 };
 
 }  // namespace
+
+double Bvh::looseness() const {
+    double nodes = 0.0;
+    for (const auto& n : m_nodes) {
+        nodes += half_area(n.box);
+    }
+    double triangles = 0.0;
+    for (const auto& b : m_tri_boxes) {
+        triangles += half_area(b);
+    }
+    return nodes / triangles;
+}
+
+bool Bvh::degraded() const {
+    // Not a number (no area at all, e.g. every triangle a point) compares false: no rebuild.
+    return m_looseness > REBUILD_GROWTH * m_built_looseness;
+}
 
 void Bvh::build(std::span<const Vec3> vertices, const MeshTopology& topology) {
     compute_triangle_boxes(vertices, topology);
@@ -62,19 +115,31 @@ void Bvh::build(std::span<const Vec3> vertices, const MeshTopology& topology) {
     std::iota(m_order.begin(), m_order.end(), 0u);
     m_nodes.clear();
     if (n == 0) {
+        m_built_looseness = m_looseness = 0.0;
         return;
     }
-    m_nodes.reserve(2 * ((n + LEAF_SIZE - 1) / LEAF_SIZE) + 1);
-    Builder b{m_nodes, m_order, m_tri_boxes, {}};
-    b.centers.resize(n);
-    for (std::uint32_t t = 0; t < n; ++t) {
-        b.centers[t] = m_tri_boxes[t].center();
+    m_nodes.assign(Builder::subtree_nodes(n), Node{});
+    Builder b{m_nodes, m_order, {}};
+    for (int k = 0; k < 3; ++k) {
+        b.centre[k].resize(n);
     }
-    b.build(0, n);
+    for (std::uint32_t t = 0; t < n; ++t) {
+        const Vec3 c = m_tri_boxes[t].center();
+        b.centre[0][t] = c.x;
+        b.centre[1][t] = c.y;
+        b.centre[2][t] = c.z;
+    }
+    b.build(0, 0, n);
+    set_boxes();
+    m_built_looseness = m_looseness;
 }
 
 void Bvh::refit(std::span<const Vec3> vertices, const MeshTopology& topology) {
     compute_triangle_boxes(vertices, topology);
+    set_boxes();
+}
+
+void Bvh::set_boxes() {
     for (auto i = m_nodes.size(); i-- > 0;) {
         Node& node = m_nodes[i];
         Aabb box;
@@ -88,6 +153,7 @@ void Bvh::refit(std::span<const Vec3> vertices, const MeshTopology& topology) {
         }
         node.box = box;
     }
+    m_looseness = looseness();
 }
 
 }  // namespace proxima

@@ -75,6 +75,21 @@ void BvhCuller::prepare(const Scene& scene) {
     m_generation = scene.generation();
 }
 
+Status BvhCuller::refine_self(const Scene& scene, std::size_t a,
+                              std::vector<std::uint32_t>& partner) {
+    partner.clear();
+    // A refit keeps the grouping of the last build. After a large deformation (parts that were
+    // close then have moved apart) its boxes are loose, and the self traversal, which opens
+    // every node pair near each triangle, pays for it: there a new tree costs less than it
+    // saves (docs/algorithms.md, "Refit or rebuild"). The other queries' traversals are short and
+    // keep the refitted tree.
+    Bvh& bvh = m_entries[a].bvh;
+    if (bvh.degraded()) {
+        bvh.build(scene[a].vertices, *scene[a].topology);
+    }
+    return {};
+}
+
 void BvhCuller::nearest_between(const Scene& scene, std::size_t a, std::size_t b, double& bound_sq,
                                 PairVisitor visit) const {
     const Bvh& ba = m_entries[a].bvh;

@@ -37,6 +37,9 @@ class BvhCuller final : public Culler {
                     PairVisitor visit) const override;
     void pairs_within(const Scene& scene, std::size_t a, std::size_t b, double radius,
                       std::vector<TrianglePair>& out) const override;
+    // No partners; rebuilds object a's hierarchy when its refit has left it degraded.
+    Status refine_self(const Scene& scene, std::size_t a,
+                       std::vector<std::uint32_t>& partner) override;
 
     struct Entry {
         ObjectId id = 0;

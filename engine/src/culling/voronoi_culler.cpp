@@ -767,6 +767,11 @@ Status VoronoiCuller::refine_within(const Scene& scene, double radius) {
 
 Status VoronoiCuller::refine_self(const Scene& scene, std::size_t a,
                                   std::vector<std::uint32_t>& partner) {
+    // The hierarchy's own step first (a rebuild after a large deformation); it proposes no
+    // partners.
+    if (Status s = m_bvh.refine_self(scene, a, partner); !s.ok()) {
+        return s;
+    }
     partner.clear();
     const double h = cell_for(scene, SELF_CELL_FACTOR);
     Job job;

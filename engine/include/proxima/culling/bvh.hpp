@@ -1,7 +1,9 @@
 #pragma once
 // Axis-aligned bounding-box hierarchy over the triangles of one object. Built top-down once per
 // topology; when only vertex positions change it is *refitted* bottom-up (same tree, new boxes),
-// which is O(n) and keeps every box conservative, so culling stays exact.
+// which is O(n) and keeps every box conservative, so culling stays exact. A refit cannot regroup
+// triangles: after a large deformation (parts that were close at the build moved apart) its
+// boxes are loose, and `degraded()` says when a rebuild is due (BvhCuller::prepare).
 
 #include <cstdint>
 #include <span>
@@ -26,8 +28,18 @@ class Bvh {
     };
     static constexpr std::uint32_t LEAF_SIZE = 4;
 
+    // A refitted tree whose boxes have grown this much against the triangles' own boxes since the
+    // last build is rebuilt (see degraded()).
+    static constexpr double REBUILD_GROWTH = 1.3;
+
+    // Top-down median splits; the two halves of a large range are built in parallel (the same
+    // tree as one thread builds).
     void build(std::span<const Vec3> vertices, const MeshTopology& topology);
     void refit(std::span<const Vec3> vertices, const MeshTopology& topology);
+    // True when the boxes are loose: the nodes' total surface area, relative to the triangles'
+    // boxes' total, is more than REBUILD_GROWTH times what it was right after the last build.
+    // A rebuild then gives the same culling answers (every tree is conservative), only faster.
+    bool degraded() const;
 
     bool empty() const { return m_nodes.empty(); }
     const std::vector<Node>& nodes() const { return m_nodes; }
@@ -37,6 +49,13 @@ class Bvh {
 
   private:
     void compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology);
+    // Every node's box from its triangles' boxes, bottom-up, and m_looseness.
+    void set_boxes();
+    // Sum of every node's box area over the sum of the triangle boxes' areas (half surface
+    // areas), after the last build and after the last build or refit.
+    double looseness() const;
+    double m_built_looseness = 0.0;
+    double m_looseness = 0.0;
     std::vector<Node> m_nodes;
     std::vector<std::uint32_t> m_order;
     std::vector<Aabb> m_tri_boxes;
