@@ -352,32 +352,36 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         const Slot* sy = &slots[run_first[j]];
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
-        const Aabb& ybox = nodes[j].box;
-        double ty[SELF_LEAF];
+        // Each triangle's threshold (read once per leaf pair: bounds shrink as the traversal
+        // goes); ty has 2 * SELF_LEAF entries so that a row from any q0 reads 8.
+        double ty[2 * SELF_LEAF] = {};
+        double tx[SELF_LEAF] = {};
         double ty_max = 0.0;
         for (std::uint32_t q = 0; q < ny; ++q) {
             ty[q] = reach(bound_sq(sy[q].id));
             ty_max = std::max(ty_max, ty[q]);
         }
-        for (std::uint32_t p = 0; p < nx; ++p) {
-            const Slot& st = sx[p];
-            const double tt = same_node ? ty[p] : reach(bound_sq(st.id));
-            // The leaf's box holds each of its triangles' boxes, so a triangle that the leaf's
-            // box already culls against every threshold involved is culled against each triangle.
-            if (!same_node && box_squared_distance(st.box, ybox) >= std::max(tt, ty_max)) {
-                continue;
+        // The rows that can keep anything: those whose box comes within the larger threshold of
+        // the other leaf's box (which holds each of its triangles' boxes); within one leaf every
+        // row.
+        unsigned live = (1U << nx) - 1U;
+        if (!same_node) {
+            for (std::uint32_t p = 0; p < nx; ++p) {
+                tx[p] = reach(bound_sq(sx[p].id));
             }
+            live = leaf_rows_near(rows, run_first[i], nx, nodes[j].box, tx, ty_max);
+        }
+        for (; live != 0; live &= live - 1) {
+            const auto p = static_cast<std::uint32_t>(std::countr_zero(live));
+            const Slot& st = sx[p];
             // The row's non-adjacent triangles whose boxes come within the larger threshold.
             const std::uint32_t q0 = same_node ? p + 1 : 0;
             if (q0 >= ny) {
                 continue;
             }
-            double threshold[SELF_LEAF] = {};
-            for (std::uint32_t q = q0; q < ny; ++q) {
-                threshold[q - q0] = std::max(tt, ty[q]);
-            }
+            const double tt = same_node ? ty[p] : tx[p];
             for (unsigned pass =
-                     leaf_row(rows, run_first[j] + q0, ny - q0, st.box, st.v, threshold);
+                     leaf_row(rows, run_first[j] + q0, ny - q0, st.box, st.v, tt, ty + q0);
                  pass != 0; pass &= pass - 1) {
                 const Slot& su = sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
                 visit(std::min(st.id, su.id), std::max(st.id, su.id));

@@ -20,8 +20,34 @@ void LeafSlots::resize(std::size_t n) {
     }
 }
 
+namespace {
+// box_squared_distance(box, slot k's box), the same operations in the same order.
+double slot_box_distance(const LeafSlots& slots, std::uint32_t k, const Aabb& box) {
+    const double gx = std::max(std::max(0.0, box.lo.x - slots.hix[k]), slots.lox[k] - box.hi.x);
+    const double gy = std::max(std::max(0.0, box.lo.y - slots.hiy[k]), slots.loy[k] - box.hi.y);
+    const double gz = std::max(std::max(0.0, box.lo.z - slots.hiz[k]), slots.loz[k] - box.hi.z);
+    double d = 0.0;
+    d += gx * gx;
+    d += gy * gy;
+    d += gz * gz;
+    return d;
+}
+}  // namespace
+
+unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                                 const Aabb& box, const double* threshold_sq, double other_sq) {
+    unsigned near = 0;
+    for (std::uint32_t p = 0; p < n; ++p) {
+        if (slot_box_distance(slots, first + p, box) < std::max(threshold_sq[p], other_sq)) {
+            near |= 1U << p;
+        }
+    }
+    return near;
+}
+
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           const Aabb& box, const TriangleIndices& v, const double* threshold_sq) {
+                           const Aabb& box, const TriangleIndices& v, double row_threshold_sq,
+                           const double* threshold_sq) {
     unsigned pass = 0;
     for (std::uint32_t q = 0; q < n; ++q) {
         const std::uint32_t k = first + q;
@@ -30,15 +56,7 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
             v[2] == slots.v0[k] || v[2] == slots.v1[k] || v[2] == slots.v2[k]) {
             continue;
         }
-        // box_squared_distance(box, slot k's box), the same operations in the same order.
-        const double gx = std::max(std::max(0.0, box.lo.x - slots.hix[k]), slots.lox[k] - box.hi.x);
-        const double gy = std::max(std::max(0.0, box.lo.y - slots.hiy[k]), slots.loy[k] - box.hi.y);
-        const double gz = std::max(std::max(0.0, box.lo.z - slots.hiz[k]), slots.loz[k] - box.hi.z);
-        double d = 0.0;
-        d += gx * gx;
-        d += gy * gy;
-        d += gz * gz;
-        if (d < threshold_sq[q]) {
+        if (slot_box_distance(slots, k, box) < std::max(row_threshold_sq, threshold_sq[q])) {
             pass |= 1U << q;
         }
     }
@@ -48,39 +66,60 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
 #ifdef PROXIMA_X86_64_DISPATCH
 namespace {
 
+// Four slots' box distances to `box` (slots k..k+3), as slot_box_distance.
+__attribute__((target("avx2"))) __m256d box_distances_avx2(const LeafSlots& slots, std::uint32_t k,
+                                                           const Aabb& box) {
+    const __m256d zero = _mm256_setzero_pd();
+    // max(max(0, box.lo - hi), lo - box.hi) per axis, then ((0 + gx²) + gy²) + gz²: as the
+    // portable copy.
+    const __m256d gx = _mm256_max_pd(
+        _mm256_max_pd(zero,
+                      _mm256_sub_pd(_mm256_set1_pd(box.lo.x), _mm256_loadu_pd(&slots.hix[k]))),
+        _mm256_sub_pd(_mm256_loadu_pd(&slots.lox[k]), _mm256_set1_pd(box.hi.x)));
+    const __m256d gy = _mm256_max_pd(
+        _mm256_max_pd(zero,
+                      _mm256_sub_pd(_mm256_set1_pd(box.lo.y), _mm256_loadu_pd(&slots.hiy[k]))),
+        _mm256_sub_pd(_mm256_loadu_pd(&slots.loy[k]), _mm256_set1_pd(box.hi.y)));
+    const __m256d gz = _mm256_max_pd(
+        _mm256_max_pd(zero,
+                      _mm256_sub_pd(_mm256_set1_pd(box.lo.z), _mm256_loadu_pd(&slots.hiz[k]))),
+        _mm256_sub_pd(_mm256_loadu_pd(&slots.loz[k]), _mm256_set1_pd(box.hi.z)));
+    __m256d d = _mm256_add_pd(zero, _mm256_mul_pd(gx, gx));
+    d = _mm256_add_pd(d, _mm256_mul_pd(gy, gy));
+    return _mm256_add_pd(d, _mm256_mul_pd(gz, gz));
+}
+
+__attribute__((target("avx2"))) unsigned leaf_rows_near_avx2(const LeafSlots& slots,
+                                                             std::uint32_t first, std::uint32_t n,
+                                                             const Aabb& box,
+                                                             const double* threshold_sq,
+                                                             double other_sq) {
+    unsigned near = 0;
+    const __m256d other = _mm256_set1_pd(other_sq);
+    for (std::uint32_t p = 0; p < n; p += 4) {
+        const __m256d d = box_distances_avx2(slots, first + p, box);
+        const __m256d th = _mm256_max_pd(_mm256_loadu_pd(threshold_sq + p), other);
+        near |= static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ))) << p;
+    }
+    return near & ((1U << n) - 1U);
+}
+
 __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
                                                        std::uint32_t n, const Aabb& box,
                                                        const TriangleIndices& v,
+                                                       double row_threshold_sq,
                                                        const double* threshold_sq) {
     unsigned pass = 0;
-    const __m256d zero = _mm256_setzero_pd();
-    const __m256d tlx = _mm256_set1_pd(box.lo.x);
-    const __m256d tly = _mm256_set1_pd(box.lo.y);
-    const __m256d tlz = _mm256_set1_pd(box.lo.z);
-    const __m256d thx = _mm256_set1_pd(box.hi.x);
-    const __m256d thy = _mm256_set1_pd(box.hi.y);
-    const __m256d thz = _mm256_set1_pd(box.hi.z);
+    const __m256d row = _mm256_set1_pd(row_threshold_sq);
     const __m128i a0 = _mm_set1_epi32(static_cast<int>(v[0]));
     const __m128i a1 = _mm_set1_epi32(static_cast<int>(v[1]));
     const __m128i a2 = _mm_set1_epi32(static_cast<int>(v[2]));
     for (std::uint32_t q = 0; q < n; q += 4) {
         const std::uint32_t k = first + q;
-        // max(max(0, box.lo - hi), lo - box.hi) per axis, then ((0 + gx²) + gy²) + gz²: as the
-        // portable copy.
-        const __m256d gx =
-            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tlx, _mm256_loadu_pd(&slots.hix[k]))),
-                          _mm256_sub_pd(_mm256_loadu_pd(&slots.lox[k]), thx));
-        const __m256d gy =
-            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tly, _mm256_loadu_pd(&slots.hiy[k]))),
-                          _mm256_sub_pd(_mm256_loadu_pd(&slots.loy[k]), thy));
-        const __m256d gz =
-            _mm256_max_pd(_mm256_max_pd(zero, _mm256_sub_pd(tlz, _mm256_loadu_pd(&slots.hiz[k]))),
-                          _mm256_sub_pd(_mm256_loadu_pd(&slots.loz[k]), thz));
-        __m256d d = _mm256_add_pd(zero, _mm256_mul_pd(gx, gx));
-        d = _mm256_add_pd(d, _mm256_mul_pd(gy, gy));
-        d = _mm256_add_pd(d, _mm256_mul_pd(gz, gz));
-        const auto close = static_cast<unsigned>(
-            _mm256_movemask_pd(_mm256_cmp_pd(d, _mm256_loadu_pd(threshold_sq + q), _CMP_LT_OQ)));
+        const __m256d d = box_distances_avx2(slots, k, box);
+        const __m256d th = _mm256_max_pd(row, _mm256_loadu_pd(threshold_sq + q));
+        const auto close =
+            static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ)));
         const __m128i b0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v0[k]));
         const __m128i b1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v1[k]));
         const __m128i b2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v2[k]));
@@ -105,14 +144,25 @@ const bool HAS_AVX2 = cpu_has_avx2();
 }  // namespace
 
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, const double* threshold_sq) {
-    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, threshold_sq)
-                    : leaf_row_portable(slots, first, n, box, v, threshold_sq);
+                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq) {
+    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, row_threshold_sq, threshold_sq)
+                    : leaf_row_portable(slots, first, n, box, v, row_threshold_sq, threshold_sq);
+}
+
+unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                        const Aabb& box, const double* threshold_sq, double other_sq) {
+    return HAS_AVX2 ? leaf_rows_near_avx2(slots, first, n, box, threshold_sq, other_sq)
+                    : leaf_rows_near_portable(slots, first, n, box, threshold_sq, other_sq);
 }
 #else
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, const double* threshold_sq) {
-    return leaf_row_portable(slots, first, n, box, v, threshold_sq);
+                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq) {
+    return leaf_row_portable(slots, first, n, box, v, row_threshold_sq, threshold_sq);
+}
+
+unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                        const Aabb& box, const double* threshold_sq, double other_sq) {
+    return leaf_rows_near_portable(slots, first, n, box, threshold_sq, other_sq);
 }
 #endif
 

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <random>
 #include <vector>
@@ -50,20 +51,34 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
             // Squared distances on this grid are multiples of 1/16: thresholds on it make ties.
             threshold[q] = threshold_step(rng) / 16.0;
         }
+        // The row's own threshold: below every column's half the time, the larger the rest.
+        const double row_threshold = row % 2 == 0 ? -1.0 : threshold_step(rng) / 16.0;
         unsigned expected = 0;
+        unsigned near = 0;
         for (std::uint32_t q = 0; q < n; ++q) {
             const auto k = first + q;
+            // leaf_rows_near, with the slots as the rows and `box` as the other leaf's box.
+            if (box_squared_distance(boxes[k], box) < std::max(threshold[q], row_threshold)) {
+                near |= 1U << q;
+            }
             if (share_vertex(v, ids[k])) {
                 ++dropped_adjacent;
-            } else if (box_squared_distance(box, boxes[k]) < threshold[q]) {
+            } else if (box_squared_distance(box, boxes[k]) <
+                       std::max(row_threshold, threshold[q])) {
                 expected |= 1U << q;
                 ++kept;
             } else {
                 ++dropped_far;
             }
         }
-        ASSERT_EQ(leaf_row_portable(slots, first, n, box, v, threshold), expected) << "row " << row;
-        ASSERT_EQ(leaf_row(slots, first, n, box, v, threshold), expected) << "row " << row;
+        ASSERT_EQ(leaf_row_portable(slots, first, n, box, v, row_threshold, threshold), expected)
+            << "row " << row;
+        ASSERT_EQ(leaf_row(slots, first, n, box, v, row_threshold, threshold), expected)
+            << "row " << row;
+        ASSERT_EQ(leaf_rows_near_portable(slots, first, n, box, threshold, row_threshold), near)
+            << "row " << row;
+        ASSERT_EQ(leaf_rows_near(slots, first, n, box, threshold, row_threshold), near)
+            << "row " << row;
     }
     // Each outcome is exercised, often.
     EXPECT_GT(kept, 5000);

@@ -37,12 +37,23 @@ struct LeafSlots {
 };
 
 // Bit q (q < n <= 8) is set when slot first + q shares no vertex with `v` and
-// box_squared_distance(box, its box) < threshold_sq[q]. threshold_sq must have 8 readable
-// entries (those from n on are ignored).
+// box_squared_distance(box, its box) < max(row_threshold_sq, threshold_sq[q]). threshold_sq must
+// have 8 readable entries (those from n on are ignored).
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, const double* threshold_sq);
+                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq);
 // The baseline x86-64 copy, whatever the processor (tests compare the two).
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           const Aabb& box, const TriangleIndices& v, const double* threshold_sq);
+                           const Aabb& box, const TriangleIndices& v, double row_threshold_sq,
+                           const double* threshold_sq);
+
+// The rows of a leaf that can keep anything against another leaf of box `box`: bit p (p < n <= 8)
+// is set when box_squared_distance(slot first + p's box, box) < max(threshold_sq[p], other_sq).
+// threshold_sq must have 8 readable entries. A row left out would keep nothing: `box` holds each
+// of the other leaf's boxes, whose box distances are at least this one (the same IEEE operations
+// on larger or equal gaps).
+unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                        const Aabb& box, const double* threshold_sq, double other_sq);
+unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
+                                 const Aabb& box, const double* threshold_sq, double other_sq);
 
 }  // namespace proxima::detail
