@@ -31,8 +31,7 @@ constexpr std::uint32_t PARALLEL_RANGE = 4096;
 struct Builder {
     std::vector<Bvh::Node>& nodes;
     std::vector<std::uint32_t>& order;
-    // Triangle box centres, one array per axis.
-    std::vector<double> centre[3];
+    std::vector<Vec3> centers;
 
     // Nodes of the subtree over `count` triangles: every split is at the middle slot, so the
     // layout depends on the count alone.
@@ -44,7 +43,7 @@ struct Builder {
 
     // Node `index` over slots [begin, end), its subtree at the following indices (pre-order:
     // left child index + 1, right child after the left subtree); boxes are set afterwards
-    // (Bvh::build). Recursion depth is log2(n / LEAF_SIZE) because every split is at the
+    // (Bvh::set_boxes). Recursion depth is log2(n / LEAF_SIZE) because every split is at the
     // median: safe.
     void build(std::uint32_t index, std::uint32_t begin, std::uint32_t end) {
         Bvh::Node& node = nodes[index];
@@ -56,29 +55,17 @@ struct Builder {
         }
         Aabb cbox;
         for (auto i = begin; i < end; ++i) {
-            const auto t = order[i];
-            cbox.extend(Vec3{centre[0][t], centre[1][t], centre[2][t]});
+            cbox.extend(centers[order[i]]);
         }
         // Median split on the longest axis of the centre bounds: balanced trees keep refitted
-        // boxes reasonably tight under deformation, and coincident centres still split. The
-        // partition runs on (centre, triangle) pairs side by side, compared by centre alone: the
-        // same comparisons, so the same order, as split_at_median on the slots.
-        const int axis = bvh_build::longest_axis(cbox);
-        const std::uint32_t mid = begin + count / 2;
-        std::vector<std::pair<double, std::uint32_t>> keyed(count);
-        for (std::uint32_t i = 0; i < count; ++i) {
-            const auto t = order[begin + i];
-            keyed[i] = {centre[axis][t], t};
-        }
-        std::nth_element(keyed.begin(), keyed.begin() + (mid - begin), keyed.end(),
-                         [](const auto& a, const auto& b) { return a.first < b.first; });
-        for (std::uint32_t i = 0; i < count; ++i) {
-            order[begin + i] = keyed[i].second;
-        }
+        // boxes reasonably tight under deformation, and coincident centres still split.
+        const auto mid = bvh_build::split_at_median<bvh_build::Ties::unordered>(
+            order, begin, end, cbox, [&](std::uint32_t t) -> const Vec3& { return centers[t]; });
         const auto right = index + 1 + subtree_nodes(mid - begin);
         node.first = right;
         node.count = 0;
-        // The halves touch disjoint slots and nodes: the same tree whichever runs first.
+        // The halves touch disjoint slots and nodes, and each half's split depends on its own
+        // slots only: the same tree whichever runs first, on any number of threads.
         if (count >= PARALLEL_RANGE) {
             tbb::parallel_invoke([&] { build(index + 1, begin, mid); },
                                  [&] { build(right, mid, end); });
@@ -120,14 +107,9 @@ void Bvh::build(std::span<const Vec3> vertices, const MeshTopology& topology) {
     }
     m_nodes.assign(Builder::subtree_nodes(n), Node{});
     Builder b{m_nodes, m_order, {}};
-    for (int k = 0; k < 3; ++k) {
-        b.centre[k].resize(n);
-    }
+    b.centers.resize(n);
     for (std::uint32_t t = 0; t < n; ++t) {
-        const Vec3 c = m_tri_boxes[t].center();
-        b.centre[0][t] = c.x;
-        b.centre[1][t] = c.y;
-        b.centre[2][t] = c.z;
+        b.centers[t] = m_tri_boxes[t].center();
     }
     b.build(0, 0, n);
     set_boxes();

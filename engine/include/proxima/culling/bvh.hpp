@@ -3,7 +3,7 @@
 // topology; when only vertex positions change it is *refitted* bottom-up (same tree, new boxes),
 // which is O(n) and keeps every box conservative, so culling stays exact. A refit cannot regroup
 // triangles: after a large deformation (parts that were close at the build moved apart) its
-// boxes are loose, and `degraded()` says when a rebuild is due (BvhCuller::prepare).
+// boxes are loose, and `degraded()` says when a rebuild is due (BvhCuller::refine_self).
 
 #include <cstdint>
 #include <span>
