@@ -78,18 +78,6 @@ struct Builder {
 
 }  // namespace
 
-double Bvh::looseness() const {
-    double nodes = 0.0;
-    for (const auto& n : m_nodes) {
-        nodes += half_area(n.box);
-    }
-    double triangles = 0.0;
-    for (const auto& b : m_tri_boxes) {
-        triangles += half_area(b);
-    }
-    return nodes / triangles;
-}
-
 bool Bvh::degraded() const {
     // Not a number (no area at all, e.g. every triangle a point) compares false: no rebuild.
     return m_looseness > REBUILD_GROWTH * m_built_looseness;
@@ -122,20 +110,26 @@ void Bvh::refit(std::span<const Vec3> vertices, const MeshTopology& topology) {
 }
 
 void Bvh::set_boxes() {
+    // The looseness's two sums in the same sweep: every triangle is in exactly one leaf.
+    double node_area = 0.0;
+    double triangle_area = 0.0;
     for (auto i = m_nodes.size(); i-- > 0;) {
         Node& node = m_nodes[i];
         Aabb box;
         if (node.leaf()) {
             for (auto k = node.first; k < node.first + node.count; ++k) {
-                box.extend(m_tri_boxes[m_order[k]]);
+                const Aabb& t = m_tri_boxes[m_order[k]];
+                box.extend(t);
+                triangle_area += half_area(t);
             }
         } else {
             box = m_nodes[i + 1].box;
             box.extend(m_nodes[node.first].box);
         }
         node.box = box;
+        node_area += half_area(box);
     }
-    m_looseness = looseness();
+    m_looseness = node_area / triangle_area;
 }
 
 }  // namespace proxima

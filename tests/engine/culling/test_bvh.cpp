@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "proxima/culling/bvh.hpp"
+#include "proxima/culling/bvh_build.hpp"
 
 namespace proxima {
 namespace {
@@ -81,8 +82,7 @@ std::uint32_t check_subtree(const Bvh& bvh, std::uint32_t i, std::uint32_t first
     // The median split: the left half is the first count / 2 slots, and along the longest axis
     // of the centres no left centre lies beyond a right one.
     const std::uint32_t left = count / 2;
-    const Vec3 e = centres.extent();
-    const int axis = (e.x >= e.y && e.x >= e.z) ? 0 : (e.y >= e.z ? 1 : 2);
+    const int axis = bvh_build::longest_axis(centres);
     double left_max = -INFINITY;
     double right_min = INFINITY;
     for (auto k = first; k < first + count; ++k) {

@@ -51,9 +51,8 @@ class Bvh {
     void compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology);
     // Every node's box from its triangles' boxes, bottom-up, and m_looseness.
     void set_boxes();
-    // Sum of every node's box area over the sum of the triangle boxes' areas (half surface
-    // areas), after the last build and after the last build or refit.
-    double looseness() const;
+    // The looseness: the sum of every node's box area over the sum of the triangle boxes' areas
+    // (half surface areas), right after the last build and after the last build or refit.
     double m_built_looseness = 0.0;
     double m_looseness = 0.0;
     std::vector<Node> m_nodes;
