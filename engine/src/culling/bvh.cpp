@@ -1,21 +1,31 @@
 #include "proxima/culling/bvh.hpp"
 
 #include <algorithm>
-#include <numeric>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
 #include "proxima/culling/bvh_build.hpp"
 
 namespace proxima {
 
+namespace {
+// Builds: ranges at least this large split their two halves into parallel tasks; triangle boxes
+// are computed in parallel chunks of this many.
+constexpr std::uint32_t PARALLEL_RANGE = 4096;
+}  // namespace
+
 void Bvh::compute_triangle_boxes(std::span<const Vec3> vertices, const MeshTopology& topology) {
     const auto& tris = topology.triangles();
     m_tri_boxes.resize(tris.size());
-    for (std::size_t t = 0; t < tris.size(); ++t) {
-        m_tri_boxes[t] =
-            triangle_box(vertices[tris[t][0]], vertices[tris[t][1]], vertices[tris[t][2]]);
-    }
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, tris.size(), PARALLEL_RANGE), [&](const auto& range) {
+            for (auto t = range.begin(); t != range.end(); ++t) {
+                m_tri_boxes[t] =
+                    triangle_box(vertices[tris[t][0]], vertices[tris[t][1]], vertices[tris[t][2]]);
+            }
+        });
 }
 
 namespace {
@@ -25,13 +35,17 @@ double half_area(const Aabb& b) {
     return e.x * e.y + e.y * e.z + e.z * e.x;
 }
 
-// Ranges at least this large split their two halves into parallel tasks.
-constexpr std::uint32_t PARALLEL_RANGE = 4096;
+// A triangle being placed: its box centre beside its index, so that the median partitions and the
+// centre bounds of every level read one contiguous run instead of looking each centre up through
+// the slot order (the build is on the self query's path after a large deformation).
+struct Item {
+    Vec3 centre;
+    std::uint32_t index;
+};
 
 struct Builder {
     std::vector<Bvh::Node>& nodes;
-    std::vector<std::uint32_t>& order;
-    std::vector<Vec3> centers;
+    std::vector<Item> items;  // in slot order once built (Bvh::order())
 
     // Nodes of the subtree over `count` triangles: every split is at the middle slot, so the
     // layout depends on the count alone.
@@ -55,12 +69,17 @@ struct Builder {
         }
         Aabb cbox;
         for (auto i = begin; i < end; ++i) {
-            cbox.extend(centers[order[i]]);
+            cbox.extend(items[i].centre);
         }
-        // Median split on the longest axis of the centre bounds: balanced trees keep refitted
-        // boxes reasonably tight under deformation, and coincident centres still split.
-        const auto mid = bvh_build::split_at_median<bvh_build::Ties::unordered>(
-            order, begin, end, cbox, [&](std::uint32_t t) -> const Vec3& { return centers[t]; });
+        // Median split on the longest axis of the centre bounds (bvh_build::longest_axis):
+        // balanced trees keep refitted boxes reasonably tight under deformation, and coincident
+        // centres still split. Equal coordinates are left as std::nth_element leaves them:
+        // deterministic for a given input.
+        const int axis = bvh_build::longest_axis(cbox);
+        const auto mid = begin + count / 2;
+        std::nth_element(
+            items.begin() + begin, items.begin() + mid, items.begin() + end,
+            [axis](const Item& a, const Item& b) { return a.centre[axis] < b.centre[axis]; });
         const auto right = index + 1 + subtree_nodes(mid - begin);
         node.first = right;
         node.count = 0;
@@ -87,19 +106,23 @@ void Bvh::build(std::span<const Vec3> vertices, const MeshTopology& topology) {
     compute_triangle_boxes(vertices, topology);
     const auto n = static_cast<std::uint32_t>(m_tri_boxes.size());
     m_order.resize(n);
-    std::iota(m_order.begin(), m_order.end(), 0u);
     m_nodes.clear();
     if (n == 0) {
         m_built_looseness = m_looseness = 0.0;
         return;
     }
     m_nodes.assign(Builder::subtree_nodes(n), Node{});
-    Builder b{m_nodes, m_order, {}};
-    b.centers.resize(n);
-    for (std::uint32_t t = 0; t < n; ++t) {
-        b.centers[t] = m_tri_boxes[t].center();
-    }
+    Builder b{m_nodes, std::vector<Item>(n)};
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, n, PARALLEL_RANGE),
+                      [&](const auto& range) {
+                          for (auto t = range.begin(); t != range.end(); ++t) {
+                              b.items[t] = {m_tri_boxes[t].center(), t};
+                          }
+                      });
     b.build(0, 0, n);
+    for (std::uint32_t s = 0; s < n; ++s) {
+        m_order[s] = b.items[s].index;
+    }
     set_boxes();
     m_built_looseness = m_looseness;
 }

@@ -113,9 +113,9 @@ std::pair<const LazyBvh::Node*, const LazyBvh::Node*> LazyBvh::children(const No
             for (std::uint32_t s = n.first; s < n.first + n.count; ++s) {
                 centres.extend(centre(m_order[s]));
             }
-            const std::uint32_t half = bvh_build::split_at_median<bvh_build::Ties::by_index>(
-                                           m_order, n.first, n.first + n.count, centres, centre) -
-                                       n.first;
+            const std::uint32_t half =
+                bvh_build::split_at_median(m_order, n.first, n.first + n.count, centres, centre) -
+                n.first;
             left = allocate_two();
             Node& l = mutable_node(left);
             Node& r = mutable_node(left + 1);
