@@ -10,7 +10,6 @@
 #include <tbb/parallel_for.h>
 
 #include "culling/cullers.hpp"
-#include "overwrite_array.hpp"
 #include "proxima/culling/leaf_rows.hpp"
 #include "proxima/distance/bounds.hpp"
 
@@ -303,44 +302,47 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     // 80 per triangle on the real frames): traversal_threshold_sq needs no square root, and a
     // larger threshold only proposes more pairs (the visitor applies the exact one), never fewer.
     auto reach = [&](double bound) { return traversal_threshold_sq(bound, slack); };
-    // The triangles in slot order, with what the leaf loop reads of each (box, corners' vertex
-    // ids): one contiguous run per leaf instead of three lookups through order().
-    struct Slot {
-        Aabb box;
-        TriangleIndices v;
-        std::uint32_t id;
-    };
-    OverwriteArray<Slot> slots(order.size());
-    // The same boxes and vertex ids as structure of arrays, for the leaf rows (leaf_row).
+    // The triangles in slot order (order()) as structure of arrays: boxes, vertex ids and
+    // diagonal extents, what the leaf rows read (leaf_row), one contiguous run per leaf.
+    const auto& vertices = scene[a].vertices;
+    const double dop_err = dop_error(coordinate_scale(scene[a].box));
     LeafSlots rows;
     rows.resize(order.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
-                      [&](const auto& range) {
-                          for (auto s = range.begin(); s != range.end(); ++s) {
-                              const auto t = order[s];
-                              slots[s] = {boxes[t], tris[t], t};
-                              rows.set(s, boxes[t], tris[t]);
-                          }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, order.size(), 4096), [&](const auto& range) {
+            for (auto s = range.begin(); s != range.end(); ++s) {
+                const auto t = order[s];
+                const auto& v = tris[t];
+                rows.set(s, boxes[t], v,
+                         DiagonalExtents::of(vertices[v[0]], vertices[v[1]], vertices[v[2]]));
+            }
+        });
     // Each node's run of slots (a subtree's triangles are contiguous in order()), bottom-up
-    // (children have larger indices than their parent), and its largest bound.
+    // (children have larger indices than their parent), its largest bound and its triangles'
+    // diagonal extents (with its box, a 14-DOP of the subtree).
     // The traversal treats a subtree of at most SELF_LEAF triangles as one leaf: measured on the
     // real frames, a leaf pair costs less than the node pairs that would split it.
     std::vector<std::uint32_t> run_first(nodes.size());
     std::vector<std::uint32_t> run_count(nodes.size());
     std::vector<double> node_threshold(nodes.size());
+    std::vector<DiagonalExtents> node_diagonals(nodes.size());
     for (auto i = nodes.size(); i-- > 0;) {
         const auto& n = nodes[i];
         if (n.leaf()) {
             double m = 0.0;
+            DiagonalExtents d = rows.diagonals(n.first);
             for (auto k = n.first; k < n.first + n.count; ++k) {
                 m = std::max(m, bound_sq(order[k]));
+                d.extend(rows.diagonals(k));
             }
             node_threshold[i] = reach(m);
+            node_diagonals[i] = d;
             run_first[i] = n.first;
             run_count[i] = n.count;
         } else {
             node_threshold[i] = std::max(node_threshold[i + 1], node_threshold[n.first]);
+            node_diagonals[i] = node_diagonals[i + 1];
+            node_diagonals[i].extend(node_diagonals[n.first]);
             run_first[i] = std::min(run_first[i + 1], run_first[n.first]);
             run_count[i] = run_count[i + 1] + run_count[n.first];
         }
@@ -348,8 +350,8 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     auto leaf = [&](std::uint32_t i) { return run_count[i] <= SELF_LEAF; };
     auto leaves = [&](std::uint32_t i, std::uint32_t j) {
         const bool same_node = i == j;
-        const Slot* sx = &slots[run_first[i]];
-        const Slot* sy = &slots[run_first[j]];
+        const std::uint32_t* sx = &order[run_first[i]];
+        const std::uint32_t* sy = &order[run_first[j]];
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
         // Each triangle's threshold (read once per leaf pair: bounds shrink as the traversal
@@ -358,39 +360,45 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         double tx[SELF_LEAF] = {};
         double ty_max = 0.0;
         for (std::uint32_t q = 0; q < ny; ++q) {
-            ty[q] = reach(bound_sq(sy[q].id));
+            ty[q] = reach(bound_sq(sy[q]));
             ty_max = std::max(ty_max, ty[q]);
         }
-        // The rows that can keep anything: those whose box comes within the larger threshold of
-        // the other leaf's box (which holds each of its triangles' boxes); within one leaf every
-        // row.
+        // The rows that can keep anything: those whose box and diagonal extents come within the
+        // larger threshold of the other leaf's (which hold each of its triangles'); within one
+        // leaf every row.
         unsigned live = (1U << nx) - 1U;
         if (!same_node) {
             for (std::uint32_t p = 0; p < nx; ++p) {
-                tx[p] = reach(bound_sq(sx[p].id));
+                tx[p] = reach(bound_sq(sx[p]));
             }
-            live = leaf_rows_near(rows, run_first[i], nx, nodes[j].box, tx, ty_max);
+            live = leaf_rows_near(rows, run_first[i], nx, nodes[j].box, node_diagonals[j], tx,
+                                  ty_max, dop_err);
         }
         for (; live != 0; live &= live - 1) {
             const auto p = static_cast<std::uint32_t>(std::countr_zero(live));
-            const Slot& st = sx[p];
-            // The row's non-adjacent triangles whose boxes come within the larger threshold.
+            const std::uint32_t st = sx[p];
+            // The row's non-adjacent triangles whose boxes and diagonal extents come within the
+            // larger threshold.
             const std::uint32_t q0 = same_node ? p + 1 : 0;
             if (q0 >= ny) {
                 continue;
             }
             const double tt = same_node ? ty[p] : tx[p];
-            for (unsigned pass =
-                     leaf_row(rows, run_first[j] + q0, ny - q0, st.box, st.v, tt, ty + q0);
+            for (unsigned pass = leaf_row(rows, run_first[j] + q0, ny - q0, run_first[i] + p, tt,
+                                          ty + q0, dop_err);
                  pass != 0; pass &= pass - 1) {
-                const Slot& su = sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
-                visit(std::min(st.id, su.id), std::max(st.id, su.id));
+                const std::uint32_t su =
+                    sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];
+                visit(std::min(st, su), std::max(st, su));
             }
         }
     };
+    // A node pair is opened when neither its boxes nor its diagonal extents keep it the larger
+    // of its two thresholds apart (the diagonals only looked at where the boxes do not).
     auto near = [&](std::uint32_t i, std::uint32_t j) {
-        return box_squared_distance(nodes[i].box, nodes[j].box) <
-               std::max(node_threshold[i], node_threshold[j]);
+        const double th = std::max(node_threshold[i], node_threshold[j]);
+        return box_squared_distance(nodes[i].box, nodes[j].box) < th &&
+               !diagonals_far(node_diagonals[i], node_diagonals[j], dop_err, th);
     };
     // dual_step's expansion with the leaves above: (X, X) gives (L, L), (R, R) and (L, R), so
     // each unordered node pair is met once; otherwise the larger node is split.

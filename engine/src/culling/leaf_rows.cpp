@@ -18,6 +18,10 @@ void LeafSlots::resize(std::size_t n) {
     for (auto* a : {&v0, &v1, &v2}) {
         a->assign(n + PAD, 0U);
     }
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        dlo[i].assign(n + PAD, 0.0);
+        dhi[i].assign(n + PAD, 0.0);
+    }
 }
 
 namespace {
@@ -32,13 +36,20 @@ double slot_box_distance(const LeafSlots& slots, std::uint32_t k, const Aabb& bo
     d += gz * gz;
     return d;
 }
+
+Aabb slot_box(const LeafSlots& slots, std::uint32_t k) {
+    return {{slots.lox[k], slots.loy[k], slots.loz[k]}, {slots.hix[k], slots.hiy[k], slots.hiz[k]}};
+}
 }  // namespace
 
 unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                                 const Aabb& box, const double* threshold_sq, double other_sq) {
+                                 const Aabb& box, const DiagonalExtents& diagonals,
+                                 const double* threshold_sq, double other_sq, double dop_error) {
     unsigned near = 0;
     for (std::uint32_t p = 0; p < n; ++p) {
-        if (slot_box_distance(slots, first + p, box) < std::max(threshold_sq[p], other_sq)) {
+        const double th = std::max(threshold_sq[p], other_sq);
+        if (slot_box_distance(slots, first + p, box) < th &&
+            !diagonals_far(diagonals, slots.diagonals(first + p), dop_error, th)) {
             near |= 1U << p;
         }
     }
@@ -46,8 +57,11 @@ unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, st
 }
 
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           const Aabb& box, const TriangleIndices& v, double row_threshold_sq,
-                           const double* threshold_sq) {
+                           std::uint32_t row, double row_threshold_sq, const double* threshold_sq,
+                           double dop_error) {
+    const Aabb box = slot_box(slots, row);
+    const DiagonalExtents diagonals = slots.diagonals(row);
+    const TriangleIndices v{slots.v0[row], slots.v1[row], slots.v2[row]};
     unsigned pass = 0;
     for (std::uint32_t q = 0; q < n; ++q) {
         const std::uint32_t k = first + q;
@@ -56,7 +70,9 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
             v[2] == slots.v0[k] || v[2] == slots.v1[k] || v[2] == slots.v2[k]) {
             continue;
         }
-        if (slot_box_distance(slots, k, box) < std::max(row_threshold_sq, threshold_sq[q])) {
+        const double th = std::max(row_threshold_sq, threshold_sq[q]);
+        if (slot_box_distance(slots, k, box) < th &&
+            !diagonals_far(diagonals, slots.diagonals(k), dop_error, th)) {
             pass |= 1U << q;
         }
     }
@@ -89,37 +105,65 @@ __attribute__((target("avx2"))) __m256d box_distances_avx2(const LeafSlots& slot
     return _mm256_add_pd(d, _mm256_mul_pd(gz, gz));
 }
 
+// Diagonal i's gap between a and slots k..k+3, and the lanes of those slots that
+// diagonals_far(a, slot, dop_error, th) keeps apart (a bit per lane): the same operations in the
+// same order.
+__attribute__((target("avx2"))) __m256d diagonal_gap_avx2(const LeafSlots& slots, std::uint32_t k,
+                                                          const DiagonalExtents& a, int i) {
+    return _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(&slots.dlo[i][k]), _mm256_set1_pd(a.hi[i])),
+                         _mm256_sub_pd(_mm256_set1_pd(a.lo[i]), _mm256_loadu_pd(&slots.dhi[i][k])));
+}
+
+__attribute__((target("avx2"))) unsigned diagonals_far_avx2(const LeafSlots& slots, std::uint32_t k,
+                                                            const DiagonalExtents& a,
+                                                            double dop_error, __m256d th) {
+    const __m256d gap = _mm256_max_pd(
+        _mm256_max_pd(diagonal_gap_avx2(slots, k, a, 0), diagonal_gap_avx2(slots, k, a, 1)),
+        _mm256_max_pd(diagonal_gap_avx2(slots, k, a, 2), diagonal_gap_avx2(slots, k, a, 3)));
+    const __m256d h = _mm256_sub_pd(gap, _mm256_set1_pd(dop_error));
+    const __m256d far = _mm256_and_pd(
+        _mm256_cmp_pd(h, _mm256_setzero_pd(), _CMP_GT_OQ),
+        _mm256_cmp_pd(_mm256_mul_pd(h, h), _mm256_mul_pd(_mm256_set1_pd(3.0), th), _CMP_GE_OQ));
+    return static_cast<unsigned>(_mm256_movemask_pd(far));
+}
+
 __attribute__((target("avx2"))) unsigned leaf_rows_near_avx2(const LeafSlots& slots,
                                                              std::uint32_t first, std::uint32_t n,
                                                              const Aabb& box,
+                                                             const DiagonalExtents& diagonals,
                                                              const double* threshold_sq,
-                                                             double other_sq) {
+                                                             double other_sq, double dop_error) {
     unsigned near = 0;
     const __m256d other = _mm256_set1_pd(other_sq);
     for (std::uint32_t p = 0; p < n; p += 4) {
         const __m256d d = box_distances_avx2(slots, first + p, box);
         const __m256d th = _mm256_max_pd(_mm256_loadu_pd(threshold_sq + p), other);
-        near |= static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ))) << p;
+        auto close = static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ)));
+        if (close != 0) {
+            close &= ~diagonals_far_avx2(slots, first + p, diagonals, dop_error, th);
+        }
+        near |= close << p;
     }
     return near & ((1U << n) - 1U);
 }
 
 __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
-                                                       std::uint32_t n, const Aabb& box,
-                                                       const TriangleIndices& v,
+                                                       std::uint32_t n, std::uint32_t row,
                                                        double row_threshold_sq,
-                                                       const double* threshold_sq) {
+                                                       const double* threshold_sq,
+                                                       double dop_error) {
+    const Aabb box = slot_box(slots, row);
+    const DiagonalExtents diagonals = slots.diagonals(row);
     unsigned pass = 0;
-    const __m256d row = _mm256_set1_pd(row_threshold_sq);
-    const __m128i a0 = _mm_set1_epi32(static_cast<int>(v[0]));
-    const __m128i a1 = _mm_set1_epi32(static_cast<int>(v[1]));
-    const __m128i a2 = _mm_set1_epi32(static_cast<int>(v[2]));
+    const __m256d row_th = _mm256_set1_pd(row_threshold_sq);
+    const __m128i a0 = _mm_set1_epi32(static_cast<int>(slots.v0[row]));
+    const __m128i a1 = _mm_set1_epi32(static_cast<int>(slots.v1[row]));
+    const __m128i a2 = _mm_set1_epi32(static_cast<int>(slots.v2[row]));
     for (std::uint32_t q = 0; q < n; q += 4) {
         const std::uint32_t k = first + q;
         const __m256d d = box_distances_avx2(slots, k, box);
-        const __m256d th = _mm256_max_pd(row, _mm256_loadu_pd(threshold_sq + q));
-        const auto close =
-            static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ)));
+        const __m256d th = _mm256_max_pd(row_th, _mm256_loadu_pd(threshold_sq + q));
+        auto close = static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ)));
         const __m128i b0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v0[k]));
         const __m128i b1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v1[k]));
         const __m128i b2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v2[k]));
@@ -132,7 +176,13 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
         shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b1));
         shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b2));
         const auto adjacent = static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(shared)));
-        pass |= (close & ~adjacent & 0xFU) << q;
+        close &= ~adjacent & 0xFU;
+        // The diagonal gaps only where a box passed (on the real frames about one column in
+        // five).
+        if (close != 0) {
+            close &= ~diagonals_far_avx2(slots, k, diagonals, dop_error, th);
+        }
+        pass |= close << q;
     }
     return pass & ((1U << n) - 1U);
 }
@@ -143,26 +193,32 @@ const bool HAS_AVX2 = cpu_has_avx2();
 
 }  // namespace
 
-unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq) {
-    return HAS_AVX2 ? leaf_row_avx2(slots, first, n, box, v, row_threshold_sq, threshold_sq)
-                    : leaf_row_portable(slots, first, n, box, v, row_threshold_sq, threshold_sq);
+unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
+                  double row_threshold_sq, const double* threshold_sq, double dop_error) {
+    return HAS_AVX2
+               ? leaf_row_avx2(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error)
+               : leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
 }
 
 unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                        const Aabb& box, const double* threshold_sq, double other_sq) {
-    return HAS_AVX2 ? leaf_rows_near_avx2(slots, first, n, box, threshold_sq, other_sq)
-                    : leaf_rows_near_portable(slots, first, n, box, threshold_sq, other_sq);
+                        const Aabb& box, const DiagonalExtents& diagonals,
+                        const double* threshold_sq, double other_sq, double dop_error) {
+    return HAS_AVX2 ? leaf_rows_near_avx2(slots, first, n, box, diagonals, threshold_sq, other_sq,
+                                          dop_error)
+                    : leaf_rows_near_portable(slots, first, n, box, diagonals, threshold_sq,
+                                              other_sq, dop_error);
 }
 #else
-unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq) {
-    return leaf_row_portable(slots, first, n, box, v, row_threshold_sq, threshold_sq);
+unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
+                  double row_threshold_sq, const double* threshold_sq, double dop_error) {
+    return leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
 }
 
 unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                        const Aabb& box, const double* threshold_sq, double other_sq) {
-    return leaf_rows_near_portable(slots, first, n, box, threshold_sq, other_sq);
+                        const Aabb& box, const DiagonalExtents& diagonals,
+                        const double* threshold_sq, double other_sq, double dop_error) {
+    return leaf_rows_near_portable(slots, first, n, box, diagonals, threshold_sq, other_sq,
+                                   dop_error);
 }
 #endif
 

@@ -1,11 +1,15 @@
 #pragma once
 // One row of the self traversal's leaf pairs (engine/src/culling/bvh_culler.cpp): one triangle
-// against up to 8 triangles of a leaf, each kept when its box comes closer than its threshold and
-// it shares no vertex with the triangle. On x86-64 a copy compiled for AVX2 (four triangles at a
-// time) runs where the processor has it, checked once at run time; it computes every box distance
-// with the same IEEE operations in the same order as the portable copy (no fused multiply-add),
-// so both keep the same triangles (tests/engine/culling/test_leaf_rows.cpp).
+// against up to 8 triangles of a leaf, each kept when it shares no vertex with the triangle, its
+// box comes closer than its threshold and the two triangles' extents along four diagonal
+// directions do not already keep them that far apart (a 14-DOP, see diagonals_far). On x86-64 a
+// copy compiled for AVX2 (four triangles at a time) runs where the processor has it, checked once
+// at run time; it computes every distance and gap with the same IEEE operations in the same order
+// as the portable copy (no fused multiply-add), so both keep the same triangles
+// (tests/engine/culling/test_leaf_rows.cpp).
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -15,15 +19,85 @@
 
 namespace proxima::detail {
 
-// Triangles' boxes and vertex ids as structure of arrays, in the order the caller chooses (the
-// traversal's slot order), with PAD readable entries past the last.
+// A triangle's (or a group's) extents along the four body diagonals (1, 1, 1), (1, 1, -1),
+// (1, -1, 1) and (-1, 1, 1), unnormalised (each of length sqrt(3)): with the box's three axes, a
+// 14-DOP. Diagonal i of a point is projection(p, i), two additions (no fused multiply-add).
+// (The six face diagonals too, a 26-DOP, dropped another 21-35 % of the candidate pairs on the
+// real frames but cost more than they saved: docs/benchmarks.md.)
+struct DiagonalExtents {
+    static constexpr int N = 4;
+    double lo[N];
+    double hi[N];
+
+    static double projection(const Vec3& p, int i) {
+        switch (i) {
+            case 0:
+                return (p.x + p.y) + p.z;
+            case 1:
+                return (p.x + p.y) - p.z;
+            case 2:
+                return (p.x - p.y) + p.z;
+            default:
+                return (p.y - p.x) + p.z;
+        }
+    }
+    static DiagonalExtents of(const Vec3& a, const Vec3& b, const Vec3& c) {
+        DiagonalExtents e;
+        for (int i = 0; i < N; ++i) {
+            const double pa = projection(a, i);
+            const double pb = projection(b, i);
+            const double pc = projection(c, i);
+            e.lo[i] = std::min(std::min(pa, pb), pc);
+            e.hi[i] = std::max(std::max(pa, pb), pc);
+        }
+        return e;
+    }
+    void extend(const DiagonalExtents& o) {
+        for (int i = 0; i < N; ++i) {
+            lo[i] = std::min(lo[i], o.lo[i]);
+            hi[i] = std::max(hi[i], o.hi[i]);
+        }
+    }
+};
+
+// The absolute rounding allowance of a diagonal gap for coordinates of magnitude at most `scale`
+// (coordinate_scale of the object's box): a projection adds three coordinates with two roundings
+// of at most one ulp of 3 * scale, so the difference of two is off by at most 4
+// ulps of 3 * scale (and rounds once more, relatively); this allows 32 ulps.
+inline double dop_error(double scale) {
+    return 32.0 * 3.0 * scale * 2.220446049250313e-16;
+}
+
+// Whether a and b's extents along one diagonal keep every point of one at least
+// sqrt(threshold_sq) from every point of the other. A gap g along a direction of length sqrt(3)
+// keeps them (g - dop_error) / sqrt(3) apart, so: the largest gap g with g - dop_error > 0 and
+// (g - dop_error)^2 >= 3 threshold_sq. The threshold carries the relative and absolute slack of
+// cull_threshold_sq, far above the rounding of the square and the product. Per diagonal the gap
+// is the larger of b.lo - a.hi and a.lo - b.hi, and the largest is taken pairwise in a fixed order
+// (the larger of x and y as x > y ? x : y, as _mm256_max_pd): the AVX2 lanes of leaf_row compute
+// the same values.
+inline bool diagonals_far(const DiagonalExtents& a, const DiagonalExtents& b, double dop_error,
+                          double threshold_sq) {
+    auto larger = [](double x, double y) { return x > y ? x : y; };
+    double g[DiagonalExtents::N];
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        g[i] = larger(b.lo[i] - a.hi[i], a.lo[i] - b.hi[i]);
+    }
+    const double h = larger(larger(g[0], g[1]), larger(g[2], g[3])) - dop_error;
+    return h > 0.0 && h * h >= 3.0 * threshold_sq;
+}
+
+// Triangles' boxes, vertex ids and diagonal extents as structure of arrays, in the order the
+// caller chooses (the traversal's slot order), with PAD readable entries past the last.
 struct LeafSlots {
     static constexpr std::size_t PAD = 8;
     std::vector<double> lox, loy, loz, hix, hiy, hiz;
     std::vector<std::uint32_t> v0, v1, v2;
+    std::array<std::vector<double>, DiagonalExtents::N> dlo, dhi;
 
     void resize(std::size_t n);
-    void set(std::size_t k, const Aabb& box, const TriangleIndices& v) {
+    void set(std::size_t k, const Aabb& box, const TriangleIndices& v,
+             const DiagonalExtents& diagonals) {
         lox[k] = box.lo.x;
         loy[k] = box.lo.y;
         loz[k] = box.lo.z;
@@ -33,27 +107,45 @@ struct LeafSlots {
         v0[k] = v[0];
         v1[k] = v[1];
         v2[k] = v[2];
+        for (int i = 0; i < DiagonalExtents::N; ++i) {
+            dlo[i][k] = diagonals.lo[i];
+            dhi[i][k] = diagonals.hi[i];
+        }
+    }
+    DiagonalExtents diagonals(std::size_t k) const {
+        DiagonalExtents e;
+        for (int i = 0; i < DiagonalExtents::N; ++i) {
+            e.lo[i] = dlo[i][k];
+            e.hi[i] = dhi[i][k];
+        }
+        return e;
     }
 };
 
-// Bit q (q < n <= 8) is set when slot first + q shares no vertex with `v` and
-// box_squared_distance(box, its box) < max(row_threshold_sq, threshold_sq[q]). threshold_sq must
-// have 8 readable entries (those from n on are ignored).
-unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, const Aabb& box,
-                  const TriangleIndices& v, double row_threshold_sq, const double* threshold_sq);
+// Bit q (q < n <= 8) is set when slot first + q shares no vertex with the row's triangle (slot
+// `row`), box_squared_distance(row's box, its box) < th and not diagonals_far(row's diagonals,
+// its diagonals, dop_error, th), where th = max(row_threshold_sq, threshold_sq[q]): a triangle
+// dropped for its box or its diagonals is at least sqrt(th) from the row's.
+// threshold_sq must have 8 readable entries (those from n on are ignored).
+unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
+                  double row_threshold_sq, const double* threshold_sq, double dop_error);
 // The baseline x86-64 copy, whatever the processor (tests compare the two).
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           const Aabb& box, const TriangleIndices& v, double row_threshold_sq,
-                           const double* threshold_sq);
+                           std::uint32_t row, double row_threshold_sq, const double* threshold_sq,
+                           double dop_error);
 
-// The rows of a leaf that can keep anything against another leaf of box `box`: bit p (p < n <= 8)
-// is set when box_squared_distance(slot first + p's box, box) < max(threshold_sq[p], other_sq).
-// threshold_sq must have 8 readable entries. A row left out would keep nothing: `box` holds each
-// of the other leaf's boxes, whose box distances are at least this one (the same IEEE operations
-// on larger or equal gaps).
+// The rows of a leaf that can keep anything against another leaf of box `box` and diagonal
+// extents `diagonals`: bit p (p < n <= 8) is set when box_squared_distance(slot first + p's box,
+// box) < th and not diagonals_far(diagonals, slot first + p's diagonals, dop_error, th), where
+// th = max(threshold_sq[p], other_sq). threshold_sq must have 8 readable entries. A
+// row left out would keep nothing: `box` and `diagonals` hold each of the other leaf's triangles',
+// whose box distances and diagonal gaps are at least these (the same IEEE operations on larger or
+// equal gaps).
 unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                        const Aabb& box, const double* threshold_sq, double other_sq);
+                        const Aabb& box, const DiagonalExtents& diagonals,
+                        const double* threshold_sq, double other_sq, double dop_error);
 unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                                 const Aabb& box, const double* threshold_sq, double other_sq);
+                                 const Aabb& box, const DiagonalExtents& diagonals,
+                                 const double* threshold_sq, double other_sq, double dop_error);
 
 }  // namespace proxima::detail
