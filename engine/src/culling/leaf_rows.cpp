@@ -11,16 +11,24 @@
 
 namespace proxima::detail {
 
+namespace {
+template <class T>
+void allocate(std::unique_ptr<T[]>& a, std::size_t n) {
+    a = std::make_unique_for_overwrite<T[]>(n + LeafSlots::PAD);
+    std::fill(a.get() + n, a.get() + n + LeafSlots::PAD, T{});
+}
+}  // namespace
+
 void LeafSlots::resize(std::size_t n) {
     for (auto* a : {&lox, &loy, &loz, &hix, &hiy, &hiz}) {
-        a->assign(n + PAD, 0.0);
+        allocate(*a, n);
     }
     for (auto* a : {&v0, &v1, &v2}) {
-        a->assign(n + PAD, 0U);
+        allocate(*a, n);
     }
     for (int i = 0; i < DiagonalExtents::N; ++i) {
-        dlo[i].assign(n + PAD, 0.0);
-        dhi[i].assign(n + PAD, 0.0);
+        allocate(dlo[i], n);
+        allocate(dhi[i], n);
     }
 }
 
