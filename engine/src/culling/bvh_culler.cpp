@@ -31,8 +31,12 @@ double center_gap(const Aabb& a, const Aabb& b) {
     return squared_norm(a.center() - b.center());
 }
 
-// The self traversal's leaf: a subtree of at most this many triangles (see self_pairs).
-constexpr std::uint32_t SELF_LEAF = 8;
+// The self traversal's leaf: a subtree of at most this many triangles (see self_pairs); a
+// multiple of 4 (the leaf rows' lanes), at most 32 (their bit masks). 8 before the leaf rows had
+// diagonal extents; with them 16-32 measured 5-10 % faster than 8 (4 slower), 24 the best of those
+// on rod-twist and armadillo-rollers by instruction count (docs/benchmarks.md).
+constexpr std::uint32_t SELF_LEAF = 24;
+static_assert(SELF_LEAF % 4 == 0 && SELF_LEAF <= 32);
 
 double node_size(const Bvh::Node& n) {
     const Vec3 e = n.box.extent();
@@ -355,7 +359,8 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
         // Each triangle's threshold (read once per leaf pair: bounds shrink as the traversal
-        // goes); ty has 2 * SELF_LEAF entries so that a row from any q0 reads 8.
+        // goes); ty has 2 * SELF_LEAF entries so that a row from any q0 may read a multiple of 4
+        // (SELF_LEAF is one).
         double ty[2 * SELF_LEAF] = {};
         double tx[SELF_LEAF] = {};
         double ty_max = 0.0;
@@ -366,7 +371,7 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         // The rows that can keep anything: those whose box and diagonal extents come within the
         // larger threshold of the other leaf's (which hold each of its triangles'); within one
         // leaf every row.
-        unsigned live = (1U << nx) - 1U;
+        unsigned live = static_cast<unsigned>((std::uint64_t{1} << nx) - 1U);
         if (!same_node) {
             for (std::uint32_t p = 0; p < nx; ++p) {
                 tx[p] = reach(bound_sq(sx[p]));

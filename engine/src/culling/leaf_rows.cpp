@@ -152,7 +152,7 @@ __attribute__((target("avx2"))) unsigned leaf_rows_near_avx2(const LeafSlots& sl
         }
         near |= close << p;
     }
-    return near & ((1U << n) - 1U);
+    return near & static_cast<unsigned>((std::uint64_t{1} << n) - 1U);
 }
 
 __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
@@ -192,7 +192,7 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
         }
         pass |= close << q;
     }
-    return pass & ((1U << n) - 1U);
+    return pass & static_cast<unsigned>((std::uint64_t{1} << n) - 1U);
 }
 
 // Read once at start-up (leaf_row runs about a million times a query; a call before this, from

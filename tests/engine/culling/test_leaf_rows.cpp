@@ -54,7 +54,7 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
     auto exactly_apart = [&](const Triangle& x, const Triangle& y, double th) {
         return triangle_triangle(x, y).squared_distance >= th * (1.0 - 1e-12);
     };
-    std::uniform_int_distribution<std::uint32_t> count(1, 8);
+    std::uniform_int_distribution<std::uint32_t> count(1, 32);
     std::uniform_int_distribution<std::uint32_t> slot(0, N - 1);
     std::uniform_int_distribution<int> threshold_step(0, 12);
     int kept = 0;
@@ -66,7 +66,7 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
         const std::uint32_t n = count(rng);
         const std::uint32_t first = std::uniform_int_distribution<std::uint32_t>(0, N - n)(rng);
         const std::uint32_t row = slot(rng);
-        double threshold[8] = {};
+        double threshold[32] = {};
         for (std::uint32_t q = 0; q < n; ++q) {
             // Squared distances on this grid are multiples of 1/16: thresholds on it make ties.
             threshold[q] = threshold_step(rng) / 16.0;

@@ -1,6 +1,6 @@
 #pragma once
 // One row of the self traversal's leaf pairs (engine/src/culling/bvh_culler.cpp): one triangle
-// against up to 8 triangles of a leaf, each kept when it shares no vertex with the triangle, its
+// against up to 32 triangles of a leaf, each kept when it shares no vertex with the triangle, its
 // box comes closer than its threshold and the two triangles' extents along four diagonal
 // directions do not already keep them that far apart (a 14-DOP, see diagonals_far). On x86-64 a
 // copy compiled for AVX2 (four triangles at a time) runs where the processor has it, checked once
@@ -124,11 +124,12 @@ struct LeafSlots {
     }
 };
 
-// Bit q (q < n <= 8) is set when slot first + q shares no vertex with the row's triangle (slot
+// Bit q (q < n <= 32) is set when slot first + q shares no vertex with the row's triangle (slot
 // `row`), box_squared_distance(row's box, its box) < th and not diagonals_far(row's diagonals,
 // its diagonals, dop_error, th), where th = max(row_threshold_sq, threshold_sq[q]): a triangle
 // dropped for its box or its diagonals is at least sqrt(th) from the row's.
-// threshold_sq must have 8 readable entries (those from n on are ignored).
+// threshold_sq must have n rounded up to a multiple of 4 readable entries (those from n on are
+// ignored).
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
                   double row_threshold_sq, const double* threshold_sq, double dop_error);
 // The baseline x86-64 copy, whatever the processor (tests compare the two).
@@ -137,9 +138,10 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
                            double dop_error);
 
 // The rows of a leaf that can keep anything against another leaf of box `box` and diagonal
-// extents `diagonals`: bit p (p < n <= 8) is set when box_squared_distance(slot first + p's box,
+// extents `diagonals`: bit p (p < n <= 32) is set when box_squared_distance(slot first + p's box,
 // box) < th and not diagonals_far(diagonals, slot first + p's diagonals, dop_error, th), where
-// th = max(threshold_sq[p], other_sq). threshold_sq must have 8 readable entries. A
+// th = max(threshold_sq[p], other_sq). threshold_sq must have n rounded up to a multiple of 4
+// readable entries. A
 // row left out would keep nothing: `box` and `diagonals` hold each of the other leaf's triangles',
 // whose box distances and diagonal gaps are at least these (the same IEEE operations on larger or
 // equal gaps).
