@@ -29,8 +29,10 @@ class Bvh {
     static constexpr std::uint32_t LEAF_SIZE = 4;
 
     // A refitted tree whose boxes have grown this much against the triangles' own boxes since the
-    // last build is rebuilt (see degraded()).
-    static constexpr double REBUILD_GROWTH = 1.3;
+    // last build is rebuilt (see degraded()). 1.3 until the self traversal culled with diagonal
+    // extents and larger leaves; since then armadillo-rollers' armadillo (1.58-1.90 after a step)
+    // answers faster from its refitted tree than rebuilt (docs/benchmarks.md).
+    static constexpr double REBUILD_GROWTH = 2.0;
 
     // Top-down median splits; the two halves of a large range are built in parallel (the same
     // tree as one thread builds).
