@@ -33,8 +33,8 @@ double center_gap(const Aabb& a, const Aabb& b) {
 
 // The self traversal's leaf: a subtree of at most this many triangles (see self_pairs); a
 // multiple of 4 (the leaf rows' lanes), at most 32 (their bit masks). 8 before the leaf rows had
-// diagonal extents; with them 16-32 measured 5-10 % faster than 8 (4 slower), 24 the best of those
-// on rod-twist and armadillo-rollers by instruction count (docs/benchmarks.md).
+// diagonal extents; with them 16-32 measured 5-10 % faster than 8 (4 slower), 24 the fastest on
+// rod-twist and the fewest instructions on armadillo-rollers (docs/benchmarks.md).
 constexpr std::uint32_t SELF_LEAF = 24;
 static_assert(SELF_LEAF % 4 == 0 && SELF_LEAF <= 32);
 

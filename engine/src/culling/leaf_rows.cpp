@@ -185,8 +185,7 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
         shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b2));
         const auto adjacent = static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(shared)));
         close &= ~adjacent & 0xFU;
-        // The diagonal gaps only where a box passed (on the real frames about one column in
-        // five).
+        // The diagonal gaps only where a box passed.
         if (close != 0) {
             close &= ~diagonals_far_avx2(slots, k, diagonals, dop_error, th);
         }
