@@ -2,7 +2,8 @@
 // Whether the processor runs AVX2, for the engine's hot loops that have a second copy compiled
 // for it (the CCD solver and prefilter, engine/src/ccd/elementary.cpp; the self traversal's leaf
 // rows, engine/src/culling/leaf_rows.cpp; the self query's frames and edge gap,
-// engine/src/distance/edge_frames.cpp and bounds.cpp; the plane-side filter on three corners,
+// engine/src/distance/edge_frames.cpp and bounds.cpp; the exact distance's edge pairs,
+// engine/src/distance/edge_pairs.cpp; the plane-side filter on three corners,
 // engine/src/geometry/predicates.cpp). Debian's packages are baseline x86-64, so the engine
 // never requires AVX2: each copy computes the same IEEE operations in the same order (those files
 // are compiled with -ffp-contract=off) and the dispatch only chooses the faster one.

@@ -30,9 +30,7 @@ constexpr double THIN = 1e-6;
 // triangle is treated as the union of its edges, whose distance is then off by at most the
 // triangle's width (<= 1e-10 of its size).
 constexpr double DEGENERATE = 1e-20;
-// Segments with sin^2(angle) below this are "nearly parallel": Ericson's s is then poorly
-// conditioned, so the four endpoint-segment candidates are considered as well.
-constexpr double NEARLY_PARALLEL = 1e-10;
+using detail::NEARLY_PARALLEL;
 
 inline ClosestPoints make_result(const Vec3& pa, const Vec3& pb) {
     return {squared_norm(pa - pb), pa, pb};
@@ -572,82 +570,22 @@ inline bool project_inside(const FaceFrame& ff, const Vec3& p, Vec3& q) {
     return v >= 0.0 && w >= 0.0 && v + w <= 1.0;
 }
 
-// The common case of disjoint triangles: all of `other` strictly on one side of the face's plane
-// (known exactly from the intersection test) and its vertex nearest to the plane projecting inside
-// the face. Every point of `other` is then at least that vertex's height above the plane, so the
-// vertex and its projection are a closest pair. `height` holds the vertices' floating-point heights
-// (scaled by |normal|), used only to pick the nearest vertex.
-inline bool vertex_over_face(const FaceFrame& ff, const Triangle& other, const double height[3],
-                             int& vertex, Vec3& q) {
-    if (ff.f.sliver) {
-        return false;
-    }
-    vertex = 0;
-    for (int i = 1; i < 3; ++i) {
-        vertex = std::fabs(height[i]) < std::fabs(height[vertex]) ? i : vertex;
-    }
-    return project_inside(ff, other[vertex], q);
-}
-
-// Branch-light closest parameters for triangle_triangle's edge pairs: the clamped line-line
-// parameter as a starting s (any start in [0, 1] is fine when the lines are parallel), then the
-// best t for that s, then the best s for that t. This is Ericson's 5.1.9 solution without its
-// branches: when his t needs no clamping his s is already optimal for it, and when it does he
-// recomputes s the same way. inv_a / inv_e are 1 / length^2, or 0 for a zero-length edge (whose
-// parameter is then 0). Quotients that are NaN (0 / 0) clamp to 0.
-inline void edge_parameters(const Vec3& p, const Vec3& dp, double a, double inv_a, const Vec3& q,
-                            const Vec3& dq, double e, double inv_e, double& s, double& t,
-                            bool& nearly_parallel) {
-    const Vec3 r = p - q;
-    const double b = dot(dp, dq);
-    const double c = dot(dp, r);
-    const double f = dot(dq, r);
-    const double denom = a * e - b * b;
-    nearly_parallel = !(denom > NEARLY_PARALLEL * a * e);
-    const double s0 = clamp01((b * f - c * e) / denom);
-    t = clamp01((b * s0 + f) * inv_e);
-    s = clamp01((b * t - c) * inv_a);
-}
-
 }  // namespace
 
 ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apart) {
-    // triangles_intersect, inlined so that its exact plane signs and the heights computed along
-    // the way also serve the vertex-over-face shortcut below.
-    const detail::PlaneSide side_a(ta[0], ta[1], ta[2]);
-    double height_b[3];
-    int sb[3];
-    side_a.corners(tb, sb, height_b);
-    const bool b_one_side = strictly_one_side(sb);
-    double height_a[3];
-    bool a_one_side = false;
-    if (!b_one_side) {
-        const detail::PlaneSide side_b(tb[0], tb[1], tb[2]);
-        int sa[3];
-        side_b.corners(ta, sa, height_a);
-        a_one_side = strictly_one_side(sa);
+    // Intersecting triangles answer 0 at a witness. A caller that proved them disjoint skips the
+    // exact test (and its plane signs): everything below is a function of the corners alone, so
+    // the result is bit-identical either way.
+    if (!apart) {
         Vec3 witness;
-        if (!a_one_side && !apart && intersect_after_planes(ta, tb, sa, sb, &witness)) {
+        if (triangles_intersect(ta, tb, &witness)) {
             return {0.0, witness, witness};
         }
     }
 
-    // Only the plane whose exact signs are already known is tried; the other case is rare enough
-    // to be left to the general path, which finds it among its vertex-face candidates.
-    int v = 0;
-    Vec3 q_fast;
-    if (b_one_side) {
-        if (vertex_over_face(make_face_frame(ta[0], ta[1], ta[2]), tb, height_b, v, q_fast)) {
-            return make_result(q_fast, tb[v]);
-        }
-    } else if (a_one_side) {
-        if (vertex_over_face(make_face_frame(tb[0], tb[1], tb[2]), ta, height_a, v, q_fast)) {
-            return make_result(ta[v], q_fast);
-        }
-    }
-
-    // The general case: the minimum over all candidates. They are compared by squared distance;
-    // the winner's points are kept, and make_result recomputes the same value from them.
+    // Disjoint: the minimum over all candidates, unless an edge pair is certified closest first.
+    // They are compared by squared distance; the winner's points are kept, and make_result
+    // recomputes the same value from them.
     double best = std::numeric_limits<double>::infinity();
     Vec3 best_a;
     Vec3 best_b;
@@ -660,85 +598,20 @@ ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apa
         }
     };
 
-    // Edge i of each triangle runs from corner i to corner i + 1: its direction and squared length
-    // (the corners themselves are read in place: copying them into per-edge structs cost
-    // store-forwarding stalls, a third of this function's cycles on n-body).
-    const Vec3 da[3] = {ta[1] - ta[0], ta[2] - ta[1], ta[0] - ta[2]};
-    const Vec3 db[3] = {tb[1] - tb[0], tb[2] - tb[1], tb[0] - tb[2]};
-    const double len_a[3] = {dot(da[0], da[0]), dot(da[1], da[1]), dot(da[2], da[2])};
-    const double len_b[3] = {dot(db[0], db[0]), dot(db[1], db[1]), dot(db[2], db[2])};
-    // 1 / length^2 of each edge (0 for a zero-length edge), computed when a pair first needs it:
-    // the first pair tried is usually certified, so most edges never need it.
-    double inv_a[3];
-    double inv_b[3];
-    unsigned inv_known = 0;  // bit i: inv_a[i]; bit 3 + j: inv_b[j]
-    auto inverse = [&](double len2, double* inv, int bit) {
-        if ((inv_known & (1U << bit)) == 0) {
-            *inv = len2 > 0.0 ? 1.0 / len2 : 0.0;
-            inv_known |= 1U << bit;
-        }
-        return *inv;
-    };
-    // The nine edge pairs are tried in a fixed order that depends on the corners only: first the
-    // four pairs of edges meeting at the closest pair of corners (ta's corner ka, tb's corner kb;
-    // edge i runs from corner i to corner i + 1), where a closest pair ending at or near a corner
-    // is certified, then the other five in row order. The first pair Larsen's test certifies is
-    // returned, so the order only decides which of several certified pairs (equally close up to
-    // rounding) gives the result, and where none is, which of equally close candidates is kept.
-    int ka = 0;
-    int kb = 0;
-    double nearest = std::numeric_limits<double>::infinity();
-    for (int k = 0; k < 3; ++k) {
-        for (int l = 0; l < 3; ++l) {
-            const double d = squared_norm(ta[k] - tb[l]);
-            if (d < nearest) {
-                nearest = d;
-                ka = k;
-                kb = l;
-            }
-        }
-    }
-    const int at_a[2] = {ka, ka == 0 ? 2 : ka - 1};
-    const int at_b[2] = {kb, kb == 0 ? 2 : kb - 1};
-    int order[9];
-    unsigned taken = 0;
-    int n_order = 0;
-    for (int x : at_a) {
-        for (int y : at_b) {
-            order[n_order++] = x * 3 + y;
-            taken |= 1U << (x * 3 + y);
-        }
-    }
-    for (int k = 0; k < 9; ++k) {
-        if ((taken & (1U << k)) == 0) {
-            order[n_order++] = k;
-        }
-    }
-    bool any_nearly_parallel = false;
-    for (const int k : order) {
-        const int i = k / 3;
-        const int j = k % 3;
-        const int i2 = i == 0 ? 2 : i - 1;  // ta's vertex off edge i
-        const int j2 = j == 0 ? 2 : j - 1;
-        double s = 0.0;
-        double t = 0.0;
-        bool nearly_parallel = false;
-        edge_parameters(ta[i], da[i], len_a[i], inverse(len_a[i], &inv_a[i], i), tb[j], db[j],
-                        len_b[j], inverse(len_b[j], &inv_b[j], 3 + j), s, t, nearly_parallel);
-        any_nearly_parallel |= nearly_parallel;
-        const Vec3 p = ta[i] + s * da[i];
-        const Vec3 q = tb[j] + t * db[j];
-        const Vec3 v = q - p;
-        // Larsen's test (PQP's TriDist): p and q are mutually closest on their edges, so
-        // each edge lies in a half-space bounded by the plane through p (resp. q) normal to
-        // v. If the third vertices lie there too, the planes separate the triangles by |v|
-        // and this pair is closest. Not trusted for nearly parallel edges, whose parameters
-        // are poorly conditioned.
-        if (!nearly_parallel && dot(ta[i2] - p, v) <= 0.0 && dot(tb[j2] - q, v) >= 0.0) {
+    // The edge pairs (detail::closest_edge_pair): the first one Larsen's test certifies in a
+    // fixed order is the answer; where none is, the first of the closest is the best so far.
+    const detail::EdgePairChoice edge = detail::closest_edge_pair(ta, tb);
+    if (edge.pair >= 0) {
+        const int i = edge.pair / 3;
+        const int j = edge.pair % 3;
+        const Vec3 p = ta[i] + edge.s * (ta[i == 2 ? 0 : i + 1] - ta[i]);
+        const Vec3 q = tb[j] + edge.t * (tb[j == 2 ? 0 : j + 1] - tb[j]);
+        if (edge.certified) {
             return make_result(p, q);
         }
         consider(p, q);
     }
+    const bool any_nearly_parallel = edge.nearly_parallel;
     if (any_nearly_parallel) {
         // Well-conditioned endpoint candidates where the parameters above are not (see
         // segment_segment); rare, so simply all vertex-edge pairs.

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -986,6 +987,112 @@ TEST(TriangleTriangle, NearlyParallelEdges) {
             EXPECT_NEAR(std::sqrt(r.squared_distance), ref_triangle_triangle(a, b), 1e-9) << it;
         }
     }
+}
+
+// The edge pairs with AVX2 (where the processor has it: the four pairs at the closest corners
+// first, the other five only when none of those is certified) must choose exactly what the scalar
+// copy chooses, with the same parameters bit for bit: random pairs at four scales, and ties that
+// make the order decide (closest points at a shared corner position, which several pairs certify;
+// translated copies, whose parallel edges tie; zero-length edges and point triangles). Fails with
+// a lane out of order, a wrong corner table entry, a changed comparison or a different tie rule.
+TEST(TriangleTriangle, EdgePairChoiceInLanesIsTheScalarChoiceBitForBit) {
+    auto bits = [](double x) { return std::bit_cast<std::uint64_t>(x); };
+    std::mt19937_64 rng(1414);
+    int certified = 0;
+    int uncertified = 0;
+    int after_first_four = 0;
+    auto check = [&](const Triangle& a, const Triangle& b) {
+        const detail::EdgePairChoice got = detail::closest_edge_pair(a, b);
+        const detail::EdgePairChoice want = detail::closest_edge_pair_portable(a, b);
+        ASSERT_EQ(got.pair, want.pair);
+        ASSERT_EQ(got.certified, want.certified);
+        ASSERT_EQ(bits(got.s), bits(want.s));
+        ASSERT_EQ(bits(got.t), bits(want.t));
+        if (!want.certified) {
+            ASSERT_EQ(got.nearly_parallel, want.nearly_parallel);
+        }
+        certified += want.certified ? 1 : 0;
+        uncertified += want.certified ? 0 : 1;
+        // A certified pair off the closest corners' four: the vector copy's second stage.
+        if (want.certified) {
+            double nearest = std::numeric_limits<double>::infinity();
+            int ka = 0;
+            int kb = 0;
+            for (int i = 0; i < 3; ++i) {
+                for (int j = 0; j < 3; ++j) {
+                    const double d = squared_norm(a[i] - b[j]);
+                    if (d < nearest) {
+                        nearest = d;
+                        ka = i;
+                        kb = j;
+                    }
+                }
+            }
+            const int i = want.pair / 3;
+            const int j = want.pair % 3;
+            const bool at_a = i == ka || i == (ka + 2) % 3;
+            const bool at_b = j == kb || j == (kb + 2) % 3;
+            after_first_four += at_a && at_b ? 0 : 1;
+        }
+    };
+    for (const double scale : {1e-6, 1.0, 1e3, 1e8}) {
+        for (int it = 0; it < 2000; ++it) {
+            const Triangle a = random_triangle(rng, -scale, scale);
+            Triangle b = random_triangle(rng, -scale, scale);
+            check(a, b);
+            // b moved off a by a random vector: mostly disjoint pairs, as the self query's.
+            const Vec3 shift = random_vec(rng, -2.0 * scale, 2.0 * scale);
+            check(a, translated(b, shift));
+            // A translated copy: parallel edges, equally close pairs.
+            check(a, translated(a, shift));
+            // b's corner l placed on a's corner: pairs meeting there all reach 0.
+            const int l = it % 3;
+            b[static_cast<std::size_t>(l)] = a[static_cast<std::size_t>(it / 3 % 3)];
+            check(a, b);
+            check(b, a);
+        }
+    }
+    const Vec3 p{1.0, 2.0, 3.0};
+    const Vec3 q{1.5, 2.0, 3.0};
+    const Triangle others[] = {{p, p, p},
+                               {p, q, q},
+                               {p, q, Vec3{2.0, 2.0, 3.0}},
+                               {Vec3{-0.0, 0.0, -0.0}, Vec3{0.0, -0.0, 0.0}, q}};
+    for (const Triangle& x : others) {
+        for (const Triangle& y : others) {
+            check(x, y);
+            check(x, translated(y, Vec3{0.0, 0.0, 1.0}));
+        }
+    }
+    // Both stages and both outcomes occur.
+    EXPECT_GT(certified, 10000);
+    EXPECT_GT(uncertified, 100);
+    EXPECT_GT(after_first_four, 100);
+}
+
+// A caller that proved two triangles disjoint skips the intersection test: the answer must be the
+// same bit for bit (the self query passes `apart` for pairs a lower bound separated, brute force
+// never does). Fails if anything after that test depends on it having run.
+TEST(TriangleTriangle, ApartGivesTheSameAnswerBitForBit) {
+    auto bits = [](double x) { return std::bit_cast<std::uint64_t>(x); };
+    std::mt19937_64 rng(1515);
+    int disjoint = 0;
+    for (int it = 0; it < 20000; ++it) {
+        const Triangle a = random_triangle(rng, -1, 1);
+        const Triangle b = translated(random_triangle(rng, -1, 1), random_vec(rng, -2, 2));
+        if (triangles_intersect(a, b)) {
+            continue;
+        }
+        ++disjoint;
+        const ClosestPoints x = triangle_triangle(a, b);
+        const ClosestPoints y = triangle_triangle(a, b, true);
+        ASSERT_EQ(bits(x.squared_distance), bits(y.squared_distance)) << it;
+        for (int c = 0; c < 3; ++c) {
+            ASSERT_EQ(bits(x.point_a[c]), bits(y.point_a[c])) << it;
+            ASSERT_EQ(bits(x.point_b[c]), bits(y.point_b[c])) << it;
+        }
+    }
+    EXPECT_GT(disjoint, 10000);
 }
 
 }  // namespace

@@ -41,11 +41,41 @@ bool triangles_intersect(const Triangle& ta, const Triangle& tb, Vec3* witness =
 
 // Distance between two closed triangles with the closest points. Exactly 0 (with both points at a
 // witness of the intersection) when `triangles_intersect` says they share a point; otherwise the
-// minimum over the 6 vertex-triangle and 9 edge-edge closest pairs (a pair certified closest may
-// be returned before the others are computed: docs/algorithms.md, Stage III).
+// minimum over the 6 vertex-triangle and 9 edge-edge closest pairs (an edge pair certified closest
+// is returned before the vertex-triangle pairs are computed: docs/algorithms.md, Stage III).
 // `apart`: the caller has proved the triangles disjoint (a positive conservative lower bound,
-// proxima/distance/bounds.hpp), so the intersection search after the plane signs is skipped; the
-// result is bit-identical, since that search finds nothing for disjoint triangles.
+// proxima/distance/bounds.hpp), so the intersection test is skipped; the result is bit-identical,
+// since nothing after that test depends on it.
 ClosestPoints triangle_triangle(const Triangle& ta, const Triangle& tb, bool apart = false);
+
+namespace detail {
+// Segments with sin^2(angle) below this are "nearly parallel": Ericson's parameters are then
+// poorly conditioned, so the endpoint candidates are considered as well.
+inline constexpr double NEARLY_PARALLEL = 1e-10;
+
+// triangle_triangle's edge pairs (engine/src/distance/edge_pairs.cpp). Pair k = 3 i + j is ta's
+// edge i (corner i to corner i + 1) against tb's edge j, with candidate closest points
+// p = ta[i] + s (ta[i + 1] - ta[i]) and q = tb[j] + t (tb[j + 1] - tb[j]): Ericson's 5.1.9
+// branch-free (the clamped line-line s, the best t for it, then the best s for that t; a
+// zero-length edge has parameter 0). Certified: not nearly parallel, and Larsen's test holds
+// (both triangles on the far sides of the planes through p and q normal to q - p).
+// The pairs are taken in a fixed order that depends on the corners only: first the four pairs of
+// edges meeting at the closest pair of corners (the first closest in row order), then the others
+// in row order. The choice is the first certified pair in that order; where none is, the first
+// of the pairs with the smallest |q - p|^2 (pair -1 when none is finite), and `nearly_parallel`
+// says whether any of the nine is.
+struct EdgePairChoice {
+    int pair = -1;
+    double s = 0.0;
+    double t = 0.0;
+    bool certified = false;
+    bool nearly_parallel = false;  // only where !certified
+};
+// With AVX2 where the processor has it (the four pairs at the closest corners first, the other
+// five only when none of those is certified); closest_edge_pair_portable is the scalar copy, the
+// same choice and parameters bit for bit (exposed for the tests).
+EdgePairChoice closest_edge_pair(const Triangle& ta, const Triangle& tb);
+EdgePairChoice closest_edge_pair_portable(const Triangle& ta, const Triangle& tb);
+}  // namespace detail
 
 }  // namespace proxima
