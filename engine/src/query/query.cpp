@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <span>
@@ -521,6 +522,11 @@ using TestedPairs =
                                     tbb::cache_aligned_allocator<std::vector<TestedPair>>,
                                     tbb::ets_key_per_instance>;
 
+// The self traversal's exact tests, counted per thread.
+using TraversalTests =
+    tbb::enumerable_thread_specific<std::uint64_t, tbb::cache_aligned_allocator<std::uint64_t>,
+                                    tbb::ets_key_per_instance>;
+
 // Rigid reuse, recording (docs/algorithms.md): one object answered by a search whose bounds were
 // widened by `skin` (SelfBests), so every pair it did not test exactly is at least the widened
 // bound apart, i.e. closest distance d + skin.of(d) (a lower bound or a box distance reached it).
@@ -866,9 +872,11 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
         if (work.should_stop()) {
             return;
         }
-        // The visitor runs on several threads: per-thread counts would need thread-local storage,
-        // so count into a relaxed atomic in small batches.
+        // The visitor runs on several threads and counts its exact tests per thread (one shared
+        // atomic, its cache line bouncing between the cores on every test, cost up to 4 % of the
+        // query: docs/benchmarks.md, "Edge pairs in vector lanes").
         // A stopped query reads as a negative bound: the culler stops its traversal.
+        TraversalTests traversal_tests(std::uint64_t{0});
         culler.self_pairs(scene, a, BoundLookup(bests.bounds(), &work.stopped),
                           [&](std::uint32_t t, std::uint32_t u) {
                               if (work.stopped.load(std::memory_order_relaxed) || named_by(t, u) ||
@@ -878,17 +886,17 @@ Status run_self(const Scene& scene, Culler& culler, Work& work, QueryResult& res
                               std::uint64_t count = 0;
                               test(t, u, count);
                               if (count != 0) {
-                                  // One object is one long traversal: look at the
-                                  // token every 4096 tests.
-                                  const auto done =
-                                      tests.fetch_add(count, std::memory_order_relaxed) + count;
-                                  if ((done & 4095U) == 0) {
+                                  // One object is one long traversal: each thread looks at
+                                  // the token every 4096 of its tests.
+                                  std::uint64_t& mine = traversal_tests.local();
+                                  mine += count;
+                                  if ((mine & 4095U) == 0) {
                                       work.should_stop();
                                   }
                               }
                           });
         bests.finish();
-        work.exact_tests += tests.load();
+        work.exact_tests += tests.load() + traversal_tests.combine(std::plus<>());
         if (record && cull && !work.stopped.load()) {
             record_list(result.self[a], tested, skin, slack, next);
         }
