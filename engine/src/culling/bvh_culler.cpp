@@ -32,7 +32,8 @@ double center_gap(const Aabb& a, const Aabb& b) {
 }
 
 // The self traversal's leaf: a subtree of at most this many triangles (see self_pairs); a
-// multiple of 4 (the leaf rows' lanes), at most 32 (their bit masks). 8 before the leaf rows had
+// multiple of 4 (leaf_rows_near's lanes; leaf_row's eight read at most 7 entries past a row's end,
+// inside ty_row), at most 32 (their bit masks). 8 before the leaf rows had
 // diagonal extents; with them 16-32 measured 5-10 % faster than 8 (4 slower), 24 the fastest on
 // rod-twist and the fewest instructions on armadillo-rollers (docs/benchmarks.md).
 constexpr std::uint32_t SELF_LEAF = 24;
@@ -310,6 +311,7 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
     // diagonal extents, what the leaf rows read (leaf_row), one contiguous run per leaf.
     const auto& vertices = scene[a].vertices;
     const double dop_err = dop_error(coordinate_scale(scene[a].box));
+    const float row_dop_err = float_dop_error(coordinate_scale(scene[a].box));
     LeafSlots rows;
     rows.resize(order.size());
     tbb::parallel_for(
@@ -320,6 +322,7 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
                 rows.set(s, boxes[t], v,
                          DiagonalExtents::of(vertices[v[0]], vertices[v[1]], vertices[v[2]]));
             }
+            rows.round_to_float(range.begin(), range.end());
         });
     // Each node's run of slots (a subtree's triangles are contiguous in order()), bottom-up
     // (children have larger indices than their parent), its largest bound and its triangles'
@@ -359,13 +362,16 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
         // Each triangle's threshold (read once per leaf pair: bounds shrink as the traversal
-        // goes); ty has 2 * SELF_LEAF entries so that a row from any q0 may read a multiple of 4
-        // (SELF_LEAF is one).
-        double ty[2 * SELF_LEAF] = {};
+        // goes), and in single precision for leaf_row (float_threshold); ty_row has
+        // 2 * SELF_LEAF entries so that a row from any q0 may read a multiple of 8 (SELF_LEAF is
+        // one).
+        double ty[SELF_LEAF] = {};
+        float ty_row[2 * SELF_LEAF] = {};
         double tx[SELF_LEAF] = {};
         double ty_max = 0.0;
         for (std::uint32_t q = 0; q < ny; ++q) {
             ty[q] = reach(bound_sq(sy[q]));
+            ty_row[q] = float_threshold(ty[q]);
             ty_max = std::max(ty_max, ty[q]);
         }
         // The rows that can keep anything: those whose box and diagonal extents come within the
@@ -388,9 +394,9 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
             if (q0 >= ny) {
                 continue;
             }
-            const double tt = same_node ? ty[p] : tx[p];
+            const float tt = float_threshold(same_node ? ty[p] : tx[p]);
             for (unsigned pass = leaf_row(rows, run_first[j] + q0, ny - q0, run_first[i] + p, tt,
-                                          ty + q0, dop_err);
+                                          ty_row + q0, row_dop_err);
                  pass != 0; pass &= pass - 1) {
                 const std::uint32_t su =
                     sy[q0 + static_cast<std::uint32_t>(std::countr_zero(pass))];

@@ -2,6 +2,7 @@
 #include "proxima/culling/leaf_rows.hpp"
 
 #include <algorithm>
+#include <limits>
 
 #include "cpu_features.hpp"
 
@@ -30,6 +31,13 @@ void LeafSlots::resize(std::size_t n) {
         allocate(dlo[i], n);
         allocate(dhi[i], n);
     }
+    for (auto* a : {&flox, &floy, &floz, &fhix, &fhiy, &fhiz}) {
+        allocate(*a, n);
+    }
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        allocate(fdlo[i], n);
+        allocate(fdhi[i], n);
+    }
 }
 
 namespace {
@@ -45,9 +53,6 @@ double slot_box_distance(const LeafSlots& slots, std::uint32_t k, const Aabb& bo
     return d;
 }
 
-Aabb slot_box(const LeafSlots& slots, std::uint32_t k) {
-    return {{slots.lox[k], slots.loy[k], slots.loz[k]}, {slots.hix[k], slots.hiy[k], slots.hiz[k]}};
-}
 }  // namespace
 
 unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
@@ -64,11 +69,19 @@ unsigned leaf_rows_near_portable(const LeafSlots& slots, std::uint32_t first, st
     return near;
 }
 
+namespace {
+// x > y ? x : y, as _mm256_max_ps (no NaN reaches it).
+inline float larger(float x, float y) {
+    return x > y ? x : y;
+}
+// The margins of leaf_row's single-precision tests (see leaf_rows.hpp).
+constexpr float ROW_MARGIN = 1.0F - 0x1p-18F;
+constexpr float ROW_FLOAT_MAX = std::numeric_limits<float>::max();
+}  // namespace
+
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           std::uint32_t row, double row_threshold_sq, const double* threshold_sq,
-                           double dop_error) {
-    const Aabb box = slot_box(slots, row);
-    const DiagonalExtents diagonals = slots.diagonals(row);
+                           std::uint32_t row, float row_threshold_sq, const float* threshold_sq,
+                           float dop_error) {
     const TriangleIndices v{slots.v0[row], slots.v1[row], slots.v2[row]};
     unsigned pass = 0;
     for (std::uint32_t q = 0; q < n; ++q) {
@@ -78,11 +91,33 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
             v[2] == slots.v0[k] || v[2] == slots.v1[k] || v[2] == slots.v2[k]) {
             continue;
         }
-        const double th = std::max(row_threshold_sq, threshold_sq[q]);
-        if (slot_box_distance(slots, k, box) < th &&
-            !diagonals_far(diagonals, slots.diagonals(k), dop_error, th)) {
-            pass |= 1U << q;
+        const float th = larger(row_threshold_sq, threshold_sq[q]);
+        // The box distance, as box_squared_distance, capped below overflow.
+        const float gx =
+            larger(larger(0.0F, slots.flox[row] - slots.fhix[k]), slots.flox[k] - slots.fhix[row]);
+        const float gy =
+            larger(larger(0.0F, slots.floy[row] - slots.fhiy[k]), slots.floy[k] - slots.fhiy[row]);
+        const float gz =
+            larger(larger(0.0F, slots.floz[row] - slots.fhiz[k]), slots.floz[k] - slots.fhiz[row]);
+        float d = 0.0F;
+        d += gx * gx;
+        d += gy * gy;
+        d += gz * gz;
+        d = d < ROW_FLOAT_MAX ? d : ROW_FLOAT_MAX;
+        if (!(d * ROW_MARGIN < th)) {
+            continue;
         }
+        // diagonals_far with the margin.
+        float g[DiagonalExtents::N];
+        for (int i = 0; i < DiagonalExtents::N; ++i) {
+            g[i] = larger(slots.fdlo[i][k] - slots.fdhi[i][row],
+                          slots.fdlo[i][row] - slots.fdhi[i][k]);
+        }
+        const float h = larger(larger(g[0], g[1]), larger(g[2], g[3])) - dop_error;
+        if (h > 0.0F && (h * h) * ROW_MARGIN > 3.0F * th) {
+            continue;
+        }
+        pass |= 1U << q;
     }
     return pass;
 }
@@ -155,43 +190,109 @@ __attribute__((target("avx2"))) unsigned leaf_rows_near_avx2(const LeafSlots& sl
     return near & static_cast<unsigned>((std::uint64_t{1} << n) - 1U);
 }
 
+// Eight slots' (k..k+7) single-precision box distances to slot `row`'s box (leaf_row_portable's
+// operations), and the lanes whose diagonal gaps keep them apart.
+// max(max(0, lo[row] - hi[k..k+7]), lo[k..k+7] - hi[row]): one axis of the box gaps.
+__attribute__((target("avx2"))) inline __m256 row_gap(const float* lo, const float* hi,
+                                                      std::uint32_t k, std::uint32_t row) {
+    return _mm256_max_ps(_mm256_max_ps(_mm256_setzero_ps(), _mm256_sub_ps(_mm256_set1_ps(lo[row]),
+                                                                          _mm256_loadu_ps(hi + k))),
+                         _mm256_sub_ps(_mm256_loadu_ps(lo + k), _mm256_set1_ps(hi[row])));
+}
+
+__attribute__((target("avx2"))) __m256 row_box_distances(const LeafSlots& slots, std::uint32_t k,
+                                                         std::uint32_t row) {
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 gx = row_gap(slots.flox.get(), slots.fhix.get(), k, row);
+    const __m256 gy = row_gap(slots.floy.get(), slots.fhiy.get(), k, row);
+    const __m256 gz = row_gap(slots.floz.get(), slots.fhiz.get(), k, row);
+    __m256 d = _mm256_add_ps(zero, _mm256_mul_ps(gx, gx));
+    d = _mm256_add_ps(d, _mm256_mul_ps(gy, gy));
+    d = _mm256_add_ps(d, _mm256_mul_ps(gz, gz));
+    return _mm256_min_ps(d, _mm256_set1_ps(ROW_FLOAT_MAX));
+}
+
+__attribute__((target("avx2"))) unsigned row_diagonals_far(const LeafSlots& slots, std::uint32_t k,
+                                                           std::uint32_t row, float dop_error,
+                                                           __m256 th) {
+    __m256 g[DiagonalExtents::N];
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        g[i] = _mm256_max_ps(
+            _mm256_sub_ps(_mm256_loadu_ps(&slots.fdlo[i][k]), _mm256_set1_ps(slots.fdhi[i][row])),
+            _mm256_sub_ps(_mm256_set1_ps(slots.fdlo[i][row]), _mm256_loadu_ps(&slots.fdhi[i][k])));
+    }
+    const __m256 h =
+        _mm256_sub_ps(_mm256_max_ps(_mm256_max_ps(g[0], g[1]), _mm256_max_ps(g[2], g[3])),
+                      _mm256_set1_ps(dop_error));
+    const __m256 far =
+        _mm256_and_ps(_mm256_cmp_ps(h, _mm256_setzero_ps(), _CMP_GT_OQ),
+                      _mm256_cmp_ps(_mm256_mul_ps(_mm256_mul_ps(h, h), _mm256_set1_ps(ROW_MARGIN)),
+                                    _mm256_mul_ps(_mm256_set1_ps(3.0F), th), _CMP_GT_OQ));
+    return static_cast<unsigned>(_mm256_movemask_ps(far));
+}
+
 __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, std::uint32_t first,
                                                        std::uint32_t n, std::uint32_t row,
-                                                       double row_threshold_sq,
-                                                       const double* threshold_sq,
-                                                       double dop_error) {
-    const Aabb box = slot_box(slots, row);
-    const DiagonalExtents diagonals = slots.diagonals(row);
+                                                       float row_threshold_sq,
+                                                       const float* threshold_sq, float dop_error) {
     unsigned pass = 0;
-    const __m256d row_th = _mm256_set1_pd(row_threshold_sq);
-    const __m128i a0 = _mm_set1_epi32(static_cast<int>(slots.v0[row]));
-    const __m128i a1 = _mm_set1_epi32(static_cast<int>(slots.v1[row]));
-    const __m128i a2 = _mm_set1_epi32(static_cast<int>(slots.v2[row]));
-    for (std::uint32_t q = 0; q < n; q += 4) {
+    const __m256 row_th = _mm256_set1_ps(row_threshold_sq);
+    const __m256i a0 = _mm256_set1_epi32(static_cast<int>(slots.v0[row]));
+    const __m256i a1 = _mm256_set1_epi32(static_cast<int>(slots.v1[row]));
+    const __m256i a2 = _mm256_set1_epi32(static_cast<int>(slots.v2[row]));
+    for (std::uint32_t q = 0; q < n; q += 8) {
         const std::uint32_t k = first + q;
-        const __m256d d = box_distances_avx2(slots, k, box);
-        const __m256d th = _mm256_max_pd(row_th, _mm256_loadu_pd(threshold_sq + q));
-        auto close = static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d, th, _CMP_LT_OQ)));
-        const __m128i b0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v0[k]));
-        const __m128i b1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v1[k]));
-        const __m128i b2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&slots.v2[k]));
-        __m128i shared = _mm_or_si128(_mm_cmpeq_epi32(a0, b0), _mm_cmpeq_epi32(a0, b1));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a0, b2));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b0));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b1));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a1, b2));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b0));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b1));
-        shared = _mm_or_si128(shared, _mm_cmpeq_epi32(a2, b2));
-        const auto adjacent = static_cast<unsigned>(_mm_movemask_ps(_mm_castsi128_ps(shared)));
-        close &= ~adjacent & 0xFU;
+        const __m256 d = row_box_distances(slots, k, row);
+        const __m256 th = _mm256_max_ps(row_th, _mm256_loadu_ps(threshold_sq + q));
+        auto close = static_cast<unsigned>(_mm256_movemask_ps(
+            _mm256_cmp_ps(_mm256_mul_ps(d, _mm256_set1_ps(ROW_MARGIN)), th, _CMP_LT_OQ)));
+        const __m256i b0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&slots.v0[k]));
+        const __m256i b1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&slots.v1[k]));
+        const __m256i b2 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&slots.v2[k]));
+        __m256i shared = _mm256_or_si256(_mm256_cmpeq_epi32(a0, b0), _mm256_cmpeq_epi32(a0, b1));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a0, b2));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a1, b0));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a1, b1));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a1, b2));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a2, b0));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a2, b1));
+        shared = _mm256_or_si256(shared, _mm256_cmpeq_epi32(a2, b2));
+        const auto adjacent =
+            static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(shared)));
+        close &= ~adjacent & 0xFFU;
         // The diagonal gaps only where a box passed.
         if (close != 0) {
-            close &= ~diagonals_far_avx2(slots, k, diagonals, dop_error, th);
+            close &= ~row_diagonals_far(slots, k, row, dop_error, th);
         }
         pass |= close << q;
     }
     return pass & static_cast<unsigned>((std::uint64_t{1} << n) - 1U);
+}
+
+// float_below / float_above of in[begin..end) into out, four at a time (the same operations:
+// cvtpd2ps rounds to nearest as the conversion does; minpd(x, m) = x < m ? x : m is std::min(x, m)
+// for no NaN, maxpd likewise).
+template <bool Above>
+__attribute__((target("avx2"))) void to_float_avx2(const double* in, float* out, std::size_t begin,
+                                                   std::size_t end) {
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    const __m256d rel = _mm256_set1_pd(0x1p-22);
+    const __m256d abs_margin = _mm256_set1_pd(1e-44);
+    const __m256d limit =
+        _mm256_set1_pd(Above ? -static_cast<double>(std::numeric_limits<float>::max())
+                             : static_cast<double>(std::numeric_limits<float>::max()));
+    std::size_t k = begin;
+    for (; k + 4 <= end; k += 4) {
+        const __m256d x = _mm256_loadu_pd(in + k);
+        const __m256d margin =
+            _mm256_add_pd(_mm256_mul_pd(_mm256_andnot_pd(sign, x), rel), abs_margin);
+        const __m256d y = Above ? _mm256_max_pd(_mm256_add_pd(x, margin), limit)
+                                : _mm256_min_pd(_mm256_sub_pd(x, margin), limit);
+        _mm_storeu_ps(out + k, _mm256_cvtpd_ps(y));
+    }
+    for (; k < end; ++k) {
+        out[k] = Above ? float_above(in[k]) : float_below(in[k]);
+    }
 }
 
 // Read once at start-up (leaf_row runs about a million times a query; a call before this, from
@@ -200,8 +301,39 @@ const bool HAS_AVX2 = cpu_has_avx2();
 
 }  // namespace
 
+void LeafSlots::round_to_float(std::size_t begin, std::size_t end) {
+    auto below = [&](const double* in, float* out) {
+        if (HAS_AVX2) {
+            to_float_avx2<false>(in, out, begin, end);
+        } else {
+            for (std::size_t k = begin; k < end; ++k) {
+                out[k] = float_below(in[k]);
+            }
+        }
+    };
+    auto above = [&](const double* in, float* out) {
+        if (HAS_AVX2) {
+            to_float_avx2<true>(in, out, begin, end);
+        } else {
+            for (std::size_t k = begin; k < end; ++k) {
+                out[k] = float_above(in[k]);
+            }
+        }
+    };
+    below(lox.get(), flox.get());
+    below(loy.get(), floy.get());
+    below(loz.get(), floz.get());
+    above(hix.get(), fhix.get());
+    above(hiy.get(), fhiy.get());
+    above(hiz.get(), fhiz.get());
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        below(dlo[i].get(), fdlo[i].get());
+        above(dhi[i].get(), fdhi[i].get());
+    }
+}
+
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
-                  double row_threshold_sq, const double* threshold_sq, double dop_error) {
+                  float row_threshold_sq, const float* threshold_sq, float dop_error) {
     return HAS_AVX2
                ? leaf_row_avx2(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error)
                : leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
@@ -216,8 +348,31 @@ unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32
                                               other_sq, dop_error);
 }
 #else
+void LeafSlots::round_to_float(std::size_t begin, std::size_t end) {
+    auto below = [&](const double* in, float* out) {
+        for (std::size_t k = begin; k < end; ++k) {
+            out[k] = float_below(in[k]);
+        }
+    };
+    auto above = [&](const double* in, float* out) {
+        for (std::size_t k = begin; k < end; ++k) {
+            out[k] = float_above(in[k]);
+        }
+    };
+    below(lox.get(), flox.get());
+    below(loy.get(), floy.get());
+    below(loz.get(), floz.get());
+    above(hix.get(), fhix.get());
+    above(hiy.get(), fhiy.get());
+    above(hiz.get(), fhiz.get());
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        below(dlo[i].get(), fdlo[i].get());
+        above(dhi[i].get(), fdhi[i].get());
+    }
+}
+
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
-                  double row_threshold_sq, const double* threshold_sq, double dop_error) {
+                  float row_threshold_sq, const float* threshold_sq, float dop_error) {
     return leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
 }
 

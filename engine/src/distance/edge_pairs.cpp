@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 
@@ -179,15 +180,17 @@ struct Lanes {
 
 constexpr Lanes lanes(std::array<int, 4> ea, std::array<int, 4> eb) {
     Lanes l{};
-    for (int i = 0; i < 4; ++i) {
-        l.a[2 * i] = 2 * ea[i];
-        l.a[2 * i + 1] = 2 * ea[i] + 1;
-        l.b[2 * i] = 2 * eb[i];
-        l.b[2 * i + 1] = 2 * eb[i] + 1;
-        l.off_a[2 * i] = 2 * off_edge(ea[i]);
-        l.off_a[2 * i + 1] = 2 * off_edge(ea[i]) + 1;
-        l.off_b[2 * i] = 2 * off_edge(eb[i]);
-        l.off_b[2 * i + 1] = 2 * off_edge(eb[i]) + 1;
+    for (std::size_t i = 0; i < 4; ++i) {
+        const std::size_t lo = 2 * i;
+        const std::size_t hi = 2 * i + 1;
+        l.a[lo] = 2 * ea[i];
+        l.a[hi] = 2 * ea[i] + 1;
+        l.b[lo] = 2 * eb[i];
+        l.b[hi] = 2 * eb[i] + 1;
+        l.off_a[lo] = 2 * off_edge(ea[i]);
+        l.off_a[hi] = 2 * off_edge(ea[i]) + 1;
+        l.off_b[lo] = 2 * off_edge(eb[i]);
+        l.off_b[hi] = 2 * off_edge(eb[i]) + 1;
         l.pair[i] = 3 * ea[i] + eb[i];
     }
     return l;
@@ -327,7 +330,7 @@ __attribute__((target("avx2"))) EdgePairChoice closest_edge_pair_avx2(const Tria
                        _mm256_permute4x64_pd(A.p.z, 0x55)},
                       {_mm256_permute4x64_pd(A.p.x, 0xAA), _mm256_permute4x64_pd(A.p.y, 0xAA),
                        _mm256_permute4x64_pd(A.p.z, 0xAA)}};
-    for (int i = 0; i < 3; ++i) {
+    for (std::size_t i = 0; i < 3; ++i) {
         const V3 r = sub(ai[i], B.p);
         _mm256_storeu_pd(n.corner_sq + 3 * i, dot4(r, r));
     }
@@ -350,9 +353,8 @@ __attribute__((target("avx2"))) EdgePairChoice closest_edge_pair_avx2(const Tria
     // None of them is: all nine (those four again, the same values), chosen as the scalar copy
     // chooses.
     unsigned bits[3];
-    for (int g = 0; g < 3; ++g) {
-        bits[g] = four_pairs(A, B, ROWS[static_cast<std::size_t>(g)], n.s + 4 * g, n.t + 4 * g,
-                             n.squared_distance + 4 * g);
+    for (std::size_t g = 0; g < 3; ++g) {
+        bits[g] = four_pairs(A, B, ROWS[g], n.s + 4 * g, n.t + 4 * g, n.squared_distance + 4 * g);
     }
     n.certified = (bits[0] & 0xFU) | ((bits[1] & 0xFU) << 4) | ((bits[2] & 1U) << 8);
     n.nearly_parallel = (bits[0] >> 4) | ((bits[1] >> 4) << 4) | (((bits[2] >> 4) & 1U) << 8);

@@ -9,6 +9,10 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -48,7 +52,9 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
         diagonals[k] = DiagonalExtents::of(tris[k][0], tris[k][1], tris[k][2]);
         slots.set(k, boxes[k], ids[k], diagonals[k]);
     }
+    slots.round_to_float(0, N);
     const double err = dop_error(2.0);
+    const float row_err = float_dop_error(2.0);
     // A pair the diagonals keep apart is at least sqrt(th) apart by the exact distance (which
     // rounds: relatively 1e-12 below).
     auto exactly_apart = [&](const Triangle& x, const Triangle& y, double th) {
@@ -62,6 +68,7 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
     int dropped_box = 0;
     int dropped_diagonal = 0;
     int rows_dropped_diagonal = 0;
+    int extra_kept = 0;
     for (int round = 0; round < 20000; ++round) {
         const std::uint32_t n = count(rng);
         const std::uint32_t first = std::uniform_int_distribution<std::uint32_t>(0, N - n)(rng);
@@ -89,10 +96,29 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
                 ++kept;
             }
         }
-        ASSERT_EQ(leaf_row_portable(slots, first, n, row, row_threshold, threshold, err), expected)
+        // The single-precision row: the portable and dispatched copies agree, keep every slot
+        // the double-precision tests keep and drop no vertex-disjoint slot that is closer than
+        // sqrt(th) by the exact distance.
+        float row_threshold_f[40] = {};
+        for (std::uint32_t q = 0; q < n; ++q) {
+            row_threshold_f[q] = float_threshold(threshold[q]);
+        }
+        const unsigned got = leaf_row(slots, first, n, row, float_threshold(row_threshold),
+                                      row_threshold_f, row_err);
+        ASSERT_EQ(leaf_row_portable(slots, first, n, row, float_threshold(row_threshold),
+                                    row_threshold_f, row_err),
+                  got)
             << "round " << round;
-        ASSERT_EQ(leaf_row(slots, first, n, row, row_threshold, threshold, err), expected)
-            << "round " << round;
+        ASSERT_EQ(got & expected, expected) << "round " << round;
+        for (std::uint32_t q = 0; q < n; ++q) {
+            const auto k = first + q;
+            if ((got & (1U << q)) == 0 && !share_vertex(ids[row], ids[k])) {
+                ASSERT_TRUE(
+                    exactly_apart(tris[row], tris[k], std::max(row_threshold, threshold[q])))
+                    << "round " << round;
+            }
+        }
+        extra_kept += std::popcount(got & ~expected);
 
         // leaf_rows_near: the slots first..first+n as the rows, against another group of slots
         // (its box and diagonal extents the union of its triangles').
@@ -133,6 +159,80 @@ TEST(LeafRows, DispatchedAndPortableKeepWhatTheScalarTestsKeep) {
     EXPECT_GT(dropped_box, 5000);
     EXPECT_GT(dropped_diagonal, 1000);
     EXPECT_GT(rows_dropped_diagonal, 1000);
+    // The margins keep exact ties on the grid (a box distance equal to the threshold): a few
+    // more than the double-precision tests, not many.
+    EXPECT_LT(extra_kept, kept / 4);
+}
+
+// The single-precision copies are rounded outward: float_below(x) <= x <= float_above(x) and
+// float_threshold(th) >= th + 1e-36 for every magnitude (subnormal, tiny, huge, past the floats),
+// and round_to_float (four at a time with AVX2 where the processor has it) gives the scalar
+// values bit for bit, whatever the range's start and length. Fails with a margin below the
+// conversion's rounding, a clamp on the wrong side or a lane out of place.
+TEST(LeafRows, SinglePrecisionCopiesHoldTheDoubles) {
+    std::mt19937_64 rng(20261129);
+    std::uniform_real_distribution<double> mantissa(-1.0, 1.0);
+    std::uniform_int_distribution<int> exponent(-160, 140);
+    std::vector<double> xs = {0.0,
+                              -0.0,
+                              1e-44,
+                              -1e-44,
+                              1e-46,
+                              1e-300,
+                              -1e-300,
+                              1e300,
+                              -1e300,
+                              static_cast<double>(std::numeric_limits<float>::max()),
+                              -static_cast<double>(std::numeric_limits<float>::max()),
+                              static_cast<double>(std::numeric_limits<float>::denorm_min())};
+    for (int i = 0; i < 20000; ++i) {
+        xs.push_back(std::ldexp(mantissa(rng), exponent(rng)));
+    }
+    for (const double x : xs) {
+        ASSERT_LE(static_cast<double>(float_below(x)), x) << x;
+        ASSERT_GE(static_cast<double>(float_above(x)), x) << x;
+        ASSERT_FALSE(std::isnan(float_below(x)));
+        if (x >= 0.0) {
+            ASSERT_GE(static_cast<double>(float_threshold(x)), x + 1e-37) << x;
+        }
+    }
+    EXPECT_EQ(float_threshold(2e30), std::numeric_limits<float>::infinity());
+    EXPECT_EQ(float_below(1e300), std::numeric_limits<float>::max());
+    EXPECT_EQ(float_above(-1e300), -std::numeric_limits<float>::max());
+
+    const std::size_t n = 203;
+    LeafSlots slots;
+    slots.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        auto x = [&](std::size_t j) { return xs[(k * 14 + j) % xs.size()]; };
+        const Aabb box{{x(0), x(1), x(2)}, {x(3), x(4), x(5)}};
+        DiagonalExtents d;
+        for (int i = 0; i < DiagonalExtents::N; ++i) {
+            d.lo[i] = x(6 + static_cast<std::size_t>(i));
+            d.hi[i] = x(10 + static_cast<std::size_t>(i));
+        }
+        slots.set(k, box, TriangleIndices{0, 1, 2}, d);
+    }
+    // Consecutive ranges of every length 0-9 (so starts at every residue), then the rest.
+    std::size_t begin = 0;
+    for (std::size_t len = 0; len < 10; ++len) {
+        slots.round_to_float(begin, begin + len);
+        begin += len;
+    }
+    slots.round_to_float(begin, n);
+    auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
+    for (std::size_t k = 0; k < n; ++k) {
+        ASSERT_EQ(bits(slots.flox[k]), bits(float_below(slots.lox[k]))) << k;
+        ASSERT_EQ(bits(slots.floy[k]), bits(float_below(slots.loy[k]))) << k;
+        ASSERT_EQ(bits(slots.floz[k]), bits(float_below(slots.loz[k]))) << k;
+        ASSERT_EQ(bits(slots.fhix[k]), bits(float_above(slots.hix[k]))) << k;
+        ASSERT_EQ(bits(slots.fhiy[k]), bits(float_above(slots.hiy[k]))) << k;
+        ASSERT_EQ(bits(slots.fhiz[k]), bits(float_above(slots.hiz[k]))) << k;
+        for (int i = 0; i < DiagonalExtents::N; ++i) {
+            ASSERT_EQ(bits(slots.fdlo[i][k]), bits(float_below(slots.dlo[i][k]))) << k;
+            ASSERT_EQ(bits(slots.fdhi[i][k]), bits(float_above(slots.dhi[i][k]))) << k;
+        }
+    }
 }
 
 }  // namespace

@@ -2,16 +2,19 @@
 // One row of the self traversal's leaf pairs (engine/src/culling/bvh_culler.cpp): one triangle
 // against up to 32 triangles of a leaf, each kept when it shares no vertex with the triangle, its
 // box comes closer than its threshold and the two triangles' extents along four diagonal
-// directions do not already keep them that far apart (a 14-DOP, see diagonals_far). On x86-64 a
-// copy compiled for AVX2 (four triangles at a time) runs where the processor has it, checked once
-// at run time; it computes every distance and gap with the same IEEE operations in the same order
-// as the portable copy (no fused multiply-add), so both keep the same triangles
+// directions do not already keep them that far apart (a 14-DOP, see diagonals_far), tested in
+// single precision on outward-rounded copies (leaf_row). On x86-64 a copy compiled for AVX2 (eight
+// triangles at a time; leaf_rows_near four, in double precision) runs where the processor has it,
+// checked once at run time; it computes every distance and gap with the same IEEE operations in
+// the same order as the portable copy (no fused multiply-add), so both keep the same triangles
 // (tests/engine/culling/test_leaf_rows.cpp).
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 
 #include "proxima/geometry/vec3.hpp"
@@ -87,6 +90,36 @@ inline bool diagonals_far(const DiagonalExtents& a, const DiagonalExtents& b, do
     return h > 0.0 && h * h >= 3.0 * threshold_sq;
 }
 
+// A float at most x and a float at least x (x not NaN), branch-free: x moved outward by 2^-22 of
+// its magnitude and 1e-44, more than the conversion's rounding (2^-24 relatively, 2^-150
+// absolutely among subnormals), and kept within the finite floats on the inner side. The row
+// test's single-precision copies of boxes and extents are rounded so, outward: they hold the
+// doubles.
+inline float float_below(double x) {
+    return static_cast<float>(std::min(x - (std::fabs(x) * 0x1p-22 + 1e-44),
+                                       static_cast<double>(std::numeric_limits<float>::max())));
+}
+inline float float_above(double x) {
+    return static_cast<float>(std::max(x + (std::fabs(x) * 0x1p-22 + 1e-44),
+                                       -static_cast<double>(std::numeric_limits<float>::max())));
+}
+
+// A squared threshold for leaf_row: a float at least th + 1e-37 for th >= 0 (th moved up by 2^-22
+// of itself and 1e-36, then rounded: so that the single-precision test's absolute rounding near
+// underflow stays below the margin), infinite above 1e30 (so that its squares never overflow
+// against a finite one).
+inline float float_threshold(double th) {
+    const double y = th + (std::fabs(th) * 0x1p-22 + 1e-36);
+    return y > 1e30 ? std::numeric_limits<float>::infinity() : static_cast<float>(y);
+}
+
+// leaf_row's diagonal allowance for coordinates of magnitude at most `scale`: dop_error plus the
+// single-precision rounding of a gap (extents of magnitude at most 3 * scale, so gaps at most
+// 6 * scale, each subtraction off by at most 2^-24 of that; this allows 2^-21).
+inline float float_dop_error(double scale) {
+    return float_above(dop_error(scale) + 6.0 * scale * 0x1p-21);
+}
+
 // Triangles' boxes, vertex ids and diagonal extents as structure of arrays, in the order the
 // caller chooses (the traversal's slot order), with PAD readable entries past the last (zero).
 // resize leaves the first n entries unset: the caller sets every slot before reading any (a
@@ -96,8 +129,13 @@ struct LeafSlots {
     std::unique_ptr<double[]> lox, loy, loz, hix, hiy, hiz;
     std::unique_ptr<std::uint32_t[]> v0, v1, v2;
     std::array<std::unique_ptr<double[]>, DiagonalExtents::N> dlo, dhi;
+    // The same boxes and extents in single precision, rounded outward (leaf_row's).
+    std::unique_ptr<float[]> flox, floy, floz, fhix, fhiy, fhiz;
+    std::array<std::unique_ptr<float[]>, DiagonalExtents::N> fdlo, fdhi;
 
     void resize(std::size_t n);
+    // Fills the single-precision copies of slots [begin, end) from the doubles set there.
+    void round_to_float(std::size_t begin, std::size_t end);
     void set(std::size_t k, const Aabb& box, const TriangleIndices& v,
              const DiagonalExtents& diagonals) {
         lox[k] = box.lo.x;
@@ -124,18 +162,22 @@ struct LeafSlots {
     }
 };
 
-// Bit q (q < n <= 32) is set when slot first + q shares no vertex with the row's triangle (slot
-// `row`), box_squared_distance(row's box, its box) < th and not diagonals_far(row's diagonals,
-// its diagonals, dop_error, th), where th = max(row_threshold_sq, threshold_sq[q]): a triangle
-// dropped for its box or its diagonals is at least sqrt(th) from the row's.
-// threshold_sq must have n rounded up to a multiple of 4 readable entries (those from n on are
+// Bit q (q < n <= 32) is set for slot first + q unless it shares a vertex with the row's triangle
+// (slot `row`) or a single-precision test on the outward-rounded copies shows the two triangles at
+// least sqrt(th) apart, th = max(row_threshold_sq, threshold_sq[q]) (float_threshold of the
+// doubles): its box distance, or its diagonal gaps less float_dop_error (diagonals_far's test),
+// each with a relative margin of 2^-18 against rounding. Every slot the double-precision test
+// keeps (share_vertex, box_squared_distance < th, diagonals_far) is kept: the single-precision
+// distances and gaps are at most the double ones up to those margins (docs/algorithms.md,
+// "Leaf rows in single precision"); a few more may be.
+// threshold_sq must have n rounded up to a multiple of 8 readable entries (those from n on are
 // ignored).
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
-                  double row_threshold_sq, const double* threshold_sq, double dop_error);
-// The baseline x86-64 copy, whatever the processor (tests compare the two).
+                  float row_threshold_sq, const float* threshold_sq, float dop_error);
+// The baseline x86-64 copy, whatever the processor: the same operations (tests compare the two).
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
-                           std::uint32_t row, double row_threshold_sq, const double* threshold_sq,
-                           double dop_error);
+                           std::uint32_t row, float row_threshold_sq, const float* threshold_sq,
+                           float dop_error);
 
 // The rows of a leaf that can keep anything against another leaf of box `box` and diagonal
 // extents `diagonals`: bit p (p < n <= 32) is set when box_squared_distance(slot first + p's box,
