@@ -317,6 +317,33 @@ __attribute__((target("avx2"))) inline unsigned four_pairs(const Corners& A, con
            (static_cast<unsigned>(_mm256_movemask_pd(nearly_parallel)) << 4);
 }
 
+// closest_corners of the nine squared distances in lanes 0-2 of sq[0..2], without its branches
+// (which the processor mispredicts: which corners are closest is close to a coin toss): NaN lanes
+// and lane 3 count as infinite, the smallest value's first lane in row order wins, and 0 when
+// none is finite.
+__attribute__((target("avx2"))) inline int closest_corners_avx2(const __m256d sq[3]) {
+    const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+    __m256d v[3];
+    for (std::size_t i = 0; i < 3; ++i) {
+        // NaN to infinity (a NaN never wins a "<" scan), lane 3 too.
+        v[i] = _mm256_blend_pd(
+            _mm256_blendv_pd(sq[i], inf, _mm256_cmp_pd(sq[i], sq[i], _CMP_UNORD_Q)), inf, 0x8);
+    }
+    __m256d m = _mm256_min_pd(_mm256_min_pd(v[0], v[1]), v[2]);
+    m = _mm256_min_pd(m, _mm256_permute4x64_pd(m, 0x4E));  // lanes 2, 3, 0, 1
+    m = _mm256_min_pd(m, _mm256_permute4x64_pd(m, 0xB1));  // lanes 1, 0, 3, 2
+    if (!(_mm256_cvtsd_f64(m) < std::numeric_limits<double>::infinity())) {
+        return 0;
+    }
+    unsigned at_min = 0;
+    for (std::size_t i = 0; i < 3; ++i) {
+        at_min |=
+            (static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(v[i], m, _CMP_EQ_OQ))) & 7U)
+            << (3 * i);
+    }
+    return std::countr_zero(at_min);
+}
+
 __attribute__((target("avx2"))) EdgePairChoice closest_edge_pair_avx2(const Triangle& ta,
                                                                       const Triangle& tb) {
     const Corners A = corners(ta);
@@ -330,13 +357,15 @@ __attribute__((target("avx2"))) EdgePairChoice closest_edge_pair_avx2(const Tria
                        _mm256_permute4x64_pd(A.p.z, 0x55)},
                       {_mm256_permute4x64_pd(A.p.x, 0xAA), _mm256_permute4x64_pd(A.p.y, 0xAA),
                        _mm256_permute4x64_pd(A.p.z, 0xAA)}};
+    __m256d sq[3];
     for (std::size_t i = 0; i < 3; ++i) {
         const V3 r = sub(ai[i], B.p);
-        _mm256_storeu_pd(n.corner_sq + 3 * i, dot4(r, r));
+        sq[i] = dot4(r, r);
+        _mm256_storeu_pd(n.corner_sq + 3 * i, sq[i]);
     }
     // The four pairs at the closest corners: the first certified one in their order is the
     // choice (they come first in the order).
-    const Lanes& at = AT_CORNERS[static_cast<std::size_t>(closest_corners(n.corner_sq))];
+    const Lanes& at = AT_CORNERS[static_cast<std::size_t>(closest_corners_avx2(sq))];
     double s4[4];
     double t4[4];
     double sq4[4];
