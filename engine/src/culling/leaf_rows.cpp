@@ -301,37 +301,6 @@ const bool HAS_AVX2 = cpu_has_avx2();
 
 }  // namespace
 
-void LeafSlots::round_to_float(std::size_t begin, std::size_t end) {
-    auto below = [&](const double* in, float* out) {
-        if (HAS_AVX2) {
-            to_float_avx2<false>(in, out, begin, end);
-        } else {
-            for (std::size_t k = begin; k < end; ++k) {
-                out[k] = float_below(in[k]);
-            }
-        }
-    };
-    auto above = [&](const double* in, float* out) {
-        if (HAS_AVX2) {
-            to_float_avx2<true>(in, out, begin, end);
-        } else {
-            for (std::size_t k = begin; k < end; ++k) {
-                out[k] = float_above(in[k]);
-            }
-        }
-    };
-    below(lox.get(), flox.get());
-    below(loy.get(), floy.get());
-    below(loz.get(), floz.get());
-    above(hix.get(), fhix.get());
-    above(hiy.get(), fhiy.get());
-    above(hiz.get(), fhiz.get());
-    for (int i = 0; i < DiagonalExtents::N; ++i) {
-        below(dlo[i].get(), fdlo[i].get());
-        above(dhi[i].get(), fdhi[i].get());
-    }
-}
-
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
                   float row_threshold_sq, const float* threshold_sq, float dop_error) {
     return HAS_AVX2
@@ -348,29 +317,6 @@ unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32
                                               other_sq, dop_error);
 }
 #else
-void LeafSlots::round_to_float(std::size_t begin, std::size_t end) {
-    auto below = [&](const double* in, float* out) {
-        for (std::size_t k = begin; k < end; ++k) {
-            out[k] = float_below(in[k]);
-        }
-    };
-    auto above = [&](const double* in, float* out) {
-        for (std::size_t k = begin; k < end; ++k) {
-            out[k] = float_above(in[k]);
-        }
-    };
-    below(lox.get(), flox.get());
-    below(loy.get(), floy.get());
-    below(loz.get(), floz.get());
-    above(hix.get(), fhix.get());
-    above(hiy.get(), fhiy.get());
-    above(hiz.get(), fhiz.get());
-    for (int i = 0; i < DiagonalExtents::N; ++i) {
-        below(dlo[i].get(), fdlo[i].get());
-        above(dhi[i].get(), fdhi[i].get());
-    }
-}
-
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
                   float row_threshold_sq, const float* threshold_sq, float dop_error) {
     return leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
@@ -383,5 +329,34 @@ unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32
                                    dop_error);
 }
 #endif
+
+namespace {
+// float_below (Above false) or float_above of in[begin..end) into out.
+template <bool Above>
+void to_float(const double* in, float* out, std::size_t begin, std::size_t end) {
+#ifdef PROXIMA_X86_64_DISPATCH
+    if (HAS_AVX2) {
+        to_float_avx2<Above>(in, out, begin, end);
+        return;
+    }
+#endif
+    for (std::size_t k = begin; k < end; ++k) {
+        out[k] = Above ? float_above(in[k]) : float_below(in[k]);
+    }
+}
+}  // namespace
+
+void LeafSlots::round_to_float(std::size_t begin, std::size_t end) {
+    to_float<false>(lox.get(), flox.get(), begin, end);
+    to_float<false>(loy.get(), floy.get(), begin, end);
+    to_float<false>(loz.get(), floz.get(), begin, end);
+    to_float<true>(hix.get(), fhix.get(), begin, end);
+    to_float<true>(hiy.get(), fhiy.get(), begin, end);
+    to_float<true>(hiz.get(), fhiz.get(), begin, end);
+    for (int i = 0; i < DiagonalExtents::N; ++i) {
+        to_float<false>(dlo[i].get(), fdlo[i].get(), begin, end);
+        to_float<true>(dhi[i].get(), fdhi[i].get(), begin, end);
+    }
+}
 
 }  // namespace proxima::detail
