@@ -6,11 +6,11 @@
 // rod-twist's, 88 % of cloth-ball's; for 90 % of rod-twist's one of the four pairs at the closest
 // corners). With the pairs tried one after another with an early exit, after the plane signs,
 // the exact test was 30 % of rod-twist's self query's instructions (22 % without the plane
-// signs). The AVX2 copy computes the
-// corners' distances in three vectors, the four pairs at the closest corners in one, and the other
-// five (two more vectors) only when none of those four is certified, with the same IEEE operations
-// in the same order as the scalar copy (this file is compiled with -ffp-contract=off): every value
-// is the same bit for bit, so the choice does not depend on the processor.
+// signs). The AVX2 copy computes the corners' distances in three vectors, the four pairs at the
+// closest corners in one, and the other five (two more vectors) only when none of those four is
+// certified, with the same IEEE operations in the same order as the scalar copy (this file is
+// compiled with -ffp-contract=off): every value is the same bit for bit, so the choice does not
+// depend on the processor.
 #include <algorithm>
 #include <array>
 #include <bit>
