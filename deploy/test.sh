@@ -237,24 +237,27 @@ stage_tsan() {
                  proxima_hardening_security proxima_hardening_soak)
   local concurrency='^(Sessions\.|Daemon\.|MassiveDaemon\.(TwoMembers|SlowMembers|CancelledVerification|SigtermEnds)|Quotas\.|IdleScenes\.|Tokens\.AnotherToken|Soak\.)'
   build_preset tsan "${targets[@]}"
-  # Preloaded below: absl::Mutex made visible to TSan (tests/sanitizers/absl_mutex_tsan.cpp).
-  c++ -std=c++20 -O1 -fPIC -shared -o build/tsan/libabsl_mutex_tsan.so \
-    tests/sanitizers/absl_mutex_tsan.cpp -ldl
+  # Preloaded below: absl::Mutex and gRPC's completion-queue hand-over of a tag made visible to
+  # TSan (tests/sanitizers/absl_mutex_tsan.cpp, tests/sanitizers/grpc_cq_tsan.cpp).
+  c++ -std=c++20 -O1 -fPIC -shared -o build/tsan/libtsan_handoffs.so \
+    tests/sanitizers/absl_mutex_tsan.cpp tests/sanitizers/grpc_cq_tsan.cpp -ldl
   local build_s
   build_s=$(seconds_since "$t0")
   t0=$(date +%s)
   local logs="$here/build/tsan/sanitizer-reports"
   # halt_on_error + exitcode: a race ends the process with status 66, whoever it is (a test
   # executable fails; a daemon dies under its test and leaves its report file).
-  # ignore_noninstrumented_modules, the preloaded absl::Mutex annotations and taskset -c 0 (oneTBB
+  # ignore_noninstrumented_modules, the preloaded hand-over annotations and taskset -c 0 (oneTBB
   # then starts no worker thread) are for Debian's uninstrumented gRPC, Abseil and oneTBB; see
   # tests/sanitizers/tsan.supp. history_size=7 (the largest; default 2): a `race:` suppression
   # can only match a stack TSan can restore, and a worker thread that hands a call to gRPC
   # (Finish sets the call's completion tag) and then runs a long query overwrites the default
   # history before gRPC's executor thread reads the tag ("failed to restore the stack"; CI of
-  # 2026-11-26 at b68de04, Sessions.MoveOnlyFramesInterleavedWithQueriesMatchInProcess).
+  # 2026-11-26 at b68de04, Sessions.MoveOnlyFramesInterleavedWithQueriesMatchInProcess). Even 7
+  # lost that stack once (CI of 2026-11-29, same test): the completion-queue annotations
+  # (grpc_cq_tsan.cpp) now order Set before the tag's run, so no suppression is needed for it.
   TSAN_OPTIONS="halt_on_error=1:exitcode=66:second_deadlock_stack=1:history_size=7:ignore_noninstrumented_modules=1:suppressions=$supp/tsan.supp:log_path=$logs/tsan" \
-    LD_PRELOAD="$here/build/tsan/libabsl_mutex_tsan.so" \
+    LD_PRELOAD="$here/build/tsan/libtsan_handoffs.so" \
     PROXIMA_SOAK_CYCLES="$soak_cycles_sanitized" \
     run_sanitized_ctest "$logs" taskset -c 0 ctest --preset tsan -j 1 -R "$concurrency" \
     -E "$tsan_skipped"

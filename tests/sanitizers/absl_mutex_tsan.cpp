@@ -8,19 +8,9 @@
 // code and in our reactors alike. This library interposes the Mutex and CondVar entry points,
 // calls the real ones (dlsym RTLD_NEXT) and tells TSan the acquire/release they stand for. It
 // adds synchronization TSan did not see, never removes any, so it hides no race of ours.
-//
-// The TSan annotations are weak: preloaded into a process without TSan (the Python client that
-// one test runs), the library only forwards.
-#include <dlfcn.h>
-
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 
-extern "C" {
-void __tsan_acquire(void* addr) __attribute__((weak));
-void __tsan_release(void* addr) __attribute__((weak));
-}
+#include "preload.hpp"
 
 namespace {
 
@@ -32,31 +22,15 @@ struct Duration {
 
 template <typename Fn>
 Fn real(const char* name) {
-    void* f = dlsym(RTLD_NEXT, name);
-    if (f == nullptr) {
-        // Abseil loaded with RTLD_LOCAL (a Python extension's dependency) is not in the global
-        // scope that RTLD_NEXT searches: ask the library itself.
-        if (void* lib = dlopen("libabsl_synchronization.so.20220623", RTLD_NOW)) {
-            f = dlsym(lib, name);
-        }
-    }
-    if (f == nullptr) {
-        std::fprintf(stderr, "absl_mutex_tsan: %s not found\n", name);
-        std::abort();
-    }
-    return reinterpret_cast<Fn>(f);
+    return tsan_preload::real<Fn>(name, "libabsl_synchronization.so.20220623");
 }
 
 void acquired(void* mu) {
-    if (__tsan_acquire != nullptr) {
-        __tsan_acquire(mu);
-    }
+    tsan_preload::acquire(mu);
 }
 
 void releasing(void* mu) {
-    if (__tsan_release != nullptr) {
-        __tsan_release(mu);
-    }
+    tsan_preload::release(mu);
 }
 
 }  // namespace
