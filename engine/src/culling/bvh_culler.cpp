@@ -361,27 +361,25 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
         const std::uint32_t* sy = &order[run_first[j]];
         const std::uint32_t nx = run_count[i];
         const std::uint32_t ny = run_count[j];
+        // A stopped query ends the traversal here (the lookups below do not check).
+        if (bound_sq.stopped()) {
+            return;
+        }
         // Each triangle's threshold (read once per leaf pair: bounds shrink as the traversal
-        // goes), and in single precision for leaf_row (float_threshold); ty_row has
-        // 2 * SELF_LEAF entries so that a row from any q0 may read a multiple of 8 (SELF_LEAF is
-        // one).
+        // goes, reach() four at a time: leaf_thresholds), and in single precision for leaf_row
+        // (float_threshold); ty_row has 2 * SELF_LEAF entries so that a row from any q0 may read
+        // a multiple of 8 (SELF_LEAF is one).
         double ty[SELF_LEAF] = {};
         float ty_row[2 * SELF_LEAF] = {};
         double tx[SELF_LEAF] = {};
-        double ty_max = 0.0;
-        for (std::uint32_t q = 0; q < ny; ++q) {
-            ty[q] = reach(bound_sq(sy[q]));
-            ty_row[q] = float_threshold(ty[q]);
-            ty_max = std::max(ty_max, ty[q]);
-        }
+        float tx_row[SELF_LEAF] = {};
+        const double ty_max = leaf_thresholds(bound_sq.bounds(), sy, ny, slack, ty, ty_row);
         // The rows that can keep anything: those whose box and diagonal extents come within the
         // larger threshold of the other leaf's (which hold each of its triangles'); within one
         // leaf every row.
         unsigned live = static_cast<unsigned>((std::uint64_t{1} << nx) - 1U);
         if (!same_node) {
-            for (std::uint32_t p = 0; p < nx; ++p) {
-                tx[p] = reach(bound_sq(sx[p]));
-            }
+            leaf_thresholds(bound_sq.bounds(), sx, nx, slack, tx, tx_row);
             live = leaf_rows_near(rows, run_first[i], nx, nodes[j].box, node_diagonals[j], tx,
                                   ty_max, dop_err);
         }
@@ -394,7 +392,7 @@ void BvhCuller::self_pairs(const Scene& scene, std::size_t a, BoundLookup bound_
             if (q0 >= ny) {
                 continue;
             }
-            const float tt = float_threshold(same_node ? ty[p] : tx[p]);
+            const float tt = same_node ? ty_row[p] : tx_row[p];
             for (unsigned pass = leaf_row(rows, run_first[j] + q0, ny - q0, run_first[i] + p, tt,
                                           ty_row + q0, row_dop_err);
                  pass != 0; pass &= pass - 1) {

@@ -122,6 +122,17 @@ unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uin
     return pass;
 }
 
+double leaf_thresholds_portable(const std::atomic<double>* bounds, const std::uint32_t* idx,
+                                std::uint32_t n, double slack, double* out, float* out_f) {
+    double largest = 0.0;
+    for (std::uint32_t q = 0; q < n; ++q) {
+        out[q] = traversal_threshold_sq(bounds[idx[q]].load(std::memory_order_relaxed), slack);
+        out_f[q] = float_threshold(out[q]);
+        largest = std::max(largest, out[q]);
+    }
+    return largest;
+}
+
 #ifdef PROXIMA_X86_64_DISPATCH
 namespace {
 
@@ -269,6 +280,47 @@ __attribute__((target("avx2"))) unsigned leaf_row_avx2(const LeafSlots& slots, s
     return pass & static_cast<unsigned>((std::uint64_t{1} << n) - 1U);
 }
 
+// leaf_thresholds_portable four at a time: the bounds loaded one by one (relaxed loads), then
+// b * (1 + 4e-9) + 2e9 * slack * slack and float_threshold's y = th + (|th| 2^-22 + 1e-36),
+// infinite above 1e30 (cvtpd2ps rounds to nearest as the conversion does), in the same order.
+__attribute__((target("avx2"))) double leaf_thresholds_avx2(const std::atomic<double>* bounds,
+                                                            const std::uint32_t* idx,
+                                                            std::uint32_t n, double slack,
+                                                            double* out, float* out_f) {
+    const __m256d scale = _mm256_set1_pd(1.0 + 4e-9);
+    const __m256d absolute = _mm256_set1_pd(2e9 * slack * slack);
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    const __m256d rel = _mm256_set1_pd(0x1p-22);
+    const __m256d tiny = _mm256_set1_pd(1e-36);
+    const __m256d huge = _mm256_set1_pd(1e30);
+    const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+    __m256d largest = _mm256_setzero_pd();
+    std::uint32_t q = 0;
+    for (; q + 4 <= n; q += 4) {
+        const __m256d b = _mm256_set_pd(bounds[idx[q + 3]].load(std::memory_order_relaxed),
+                                        bounds[idx[q + 2]].load(std::memory_order_relaxed),
+                                        bounds[idx[q + 1]].load(std::memory_order_relaxed),
+                                        bounds[idx[q]].load(std::memory_order_relaxed));
+        const __m256d th = _mm256_add_pd(_mm256_mul_pd(b, scale), absolute);
+        _mm256_storeu_pd(out + q, th);
+        const __m256d y =
+            _mm256_add_pd(th, _mm256_add_pd(_mm256_mul_pd(_mm256_andnot_pd(sign, th), rel), tiny));
+        const __m256d capped = _mm256_blendv_pd(y, inf, _mm256_cmp_pd(y, huge, _CMP_GT_OQ));
+        _mm_storeu_ps(out_f + q, _mm256_cvtpd_ps(capped));
+        // std::max(largest, th) = largest < th ? th : largest: maxpd(th, largest).
+        largest = _mm256_max_pd(th, largest);
+    }
+    alignas(32) double lanes[4];
+    _mm256_store_pd(lanes, largest);
+    double m = std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3]));
+    for (; q < n; ++q) {
+        out[q] = traversal_threshold_sq(bounds[idx[q]].load(std::memory_order_relaxed), slack);
+        out_f[q] = float_threshold(out[q]);
+        m = std::max(m, out[q]);
+    }
+    return m;
+}
+
 // float_below / float_above of in[begin..end) into out, four at a time (the same operations:
 // cvtpd2ps rounds to nearest as the conversion does; minpd(x, m) = x < m ? x : m is std::min(x, m)
 // for no NaN, maxpd likewise).
@@ -308,6 +360,12 @@ unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, 
                : leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
 }
 
+double leaf_thresholds(const std::atomic<double>* bounds, const std::uint32_t* idx, std::uint32_t n,
+                       double slack, double* out, float* out_f) {
+    return HAS_AVX2 ? leaf_thresholds_avx2(bounds, idx, n, slack, out, out_f)
+                    : leaf_thresholds_portable(bounds, idx, n, slack, out, out_f);
+}
+
 unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
                         const Aabb& box, const DiagonalExtents& diagonals,
                         const double* threshold_sq, double other_sq, double dop_error) {
@@ -320,6 +378,11 @@ unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32
 unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, std::uint32_t row,
                   float row_threshold_sq, const float* threshold_sq, float dop_error) {
     return leaf_row_portable(slots, first, n, row, row_threshold_sq, threshold_sq, dop_error);
+}
+
+double leaf_thresholds(const std::atomic<double>* bounds, const std::uint32_t* idx, std::uint32_t n,
+                       double slack, double* out, float* out_f) {
+    return leaf_thresholds_portable(bounds, idx, n, slack, out, out_f);
 }
 
 unsigned leaf_rows_near(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,

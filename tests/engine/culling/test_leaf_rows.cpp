@@ -9,11 +9,13 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include "proxima/culling/leaf_rows.hpp"
@@ -233,6 +235,68 @@ TEST(LeafRows, SinglePrecisionCopiesHoldTheDoubles) {
             ASSERT_EQ(bits(slots.fdhi[i][k]), bits(float_above(slots.dhi[i][k]))) << k;
         }
     }
+}
+
+// leaf_thresholds (the traversal's per-leaf thresholds, four at a time where AVX2 runs) gives
+// exactly traversal_threshold_sq and float_threshold of each bound, in the order of idx, and
+// their largest; bounds from 0 and subnormals to past the floats and infinity, every n 0-32.
+TEST(LeafRows, LeafThresholdsAreTheScalarThresholdsBitForBit) {
+    std::mt19937_64 rng(20261129);
+    std::uniform_real_distribution<double> mantissa(0.0, 1.0);
+    std::uniform_int_distribution<int> exponent(-1074, 1023);
+    const std::size_t m = 4096;
+    std::vector<std::atomic<double>> bounds(m);
+    const double specials[] = {0.0,
+                               std::numeric_limits<double>::infinity(),
+                               std::numeric_limits<double>::denorm_min(),
+                               1e-300,
+                               1e30,
+                               1e30 * (1.0 - 1e-9),
+                               static_cast<double>(std::numeric_limits<float>::max()),
+                               std::numeric_limits<double>::max()};
+    for (std::size_t k = 0; k < m; ++k) {
+        const double b =
+            k < std::size(specials) ? specials[k] : std::ldexp(mantissa(rng), exponent(rng));
+        bounds[k].store(b, std::memory_order_relaxed);
+    }
+    std::uniform_int_distribution<std::uint32_t> pick(0, m - 1);
+    auto bits = [](auto x) {
+        return std::bit_cast<std::conditional_t<sizeof(x) == 8, std::uint64_t, std::uint32_t>>(x);
+    };
+    std::size_t finite_floats = 0;
+    std::size_t infinite_floats = 0;
+    for (const double slack : {0.0, 1e-300, 3.3e-15, 2.2e-12, 1e-6}) {
+        for (int round = 0; round < 200; ++round) {
+            for (std::uint32_t n = 0; n <= 32; ++n) {
+                std::uint32_t idx[32];
+                for (std::uint32_t q = 0; q < n; ++q) {
+                    idx[q] = round == 0 && q < std::size(specials) ? q : pick(rng);
+                }
+                double out[32];
+                float out_f[32];
+                double ref[32];
+                float ref_f[32];
+                const double largest = leaf_thresholds(bounds.data(), idx, n, slack, out, out_f);
+                const double ref_largest =
+                    leaf_thresholds_portable(bounds.data(), idx, n, slack, ref, ref_f);
+                ASSERT_EQ(bits(largest), bits(ref_largest)) << n;
+                double expect_largest = 0.0;
+                for (std::uint32_t q = 0; q < n; ++q) {
+                    const double th = traversal_threshold_sq(bounds[idx[q]].load(), slack);
+                    ASSERT_EQ(bits(out[q]), bits(th)) << n << " " << q;
+                    ASSERT_EQ(bits(ref[q]), bits(th)) << n << " " << q;
+                    ASSERT_EQ(bits(out_f[q]), bits(float_threshold(th))) << n << " " << q;
+                    ASSERT_EQ(bits(ref_f[q]), bits(out_f[q])) << n << " " << q;
+                    expect_largest = std::max(expect_largest, th);
+                    (std::isinf(out_f[q]) ? infinite_floats : finite_floats) += 1;
+                }
+                ASSERT_EQ(bits(largest), bits(expect_largest)) << n;
+            }
+        }
+    }
+    // Both sides of float_threshold's cut at 1e30 were met.
+    EXPECT_GT(finite_floats, 1000U);
+    EXPECT_GT(infinite_floats, 1000U);
 }
 
 }  // namespace

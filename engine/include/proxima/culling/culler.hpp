@@ -72,6 +72,10 @@ class BoundLookup {
                    ? -1.0
                    : m_bounds[t].load(std::memory_order_relaxed);
     }
+    // The array itself, for a culler that reads many bounds at once (leaf_thresholds), after
+    // checking stopped() itself.
+    const std::atomic<double>* bounds() const { return m_bounds; }
+    bool stopped() const { return m_stop->load(std::memory_order_relaxed); }
 
   private:
     const std::atomic<double>* m_bounds;

@@ -11,12 +11,14 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <memory>
 
+#include "proxima/distance/bounds.hpp"
 #include "proxima/geometry/vec3.hpp"
 #include "proxima/mesh/mesh.hpp"
 
@@ -178,6 +180,15 @@ unsigned leaf_row(const LeafSlots& slots, std::uint32_t first, std::uint32_t n, 
 unsigned leaf_row_portable(const LeafSlots& slots, std::uint32_t first, std::uint32_t n,
                            std::uint32_t row, float row_threshold_sq, const float* threshold_sq,
                            float dop_error);
+
+// The traversal's thresholds of a leaf's n triangles (n <= 32), whose bounds are
+// bounds[idx[0..n)] (relaxed loads, as BoundLookup): out[q] = traversal_threshold_sq(bound, slack)
+// and out_f[q] = float_threshold(out[q]), leaf_row's single-precision copy. Returns the largest
+// out[q] (0 when n = 0). The AVX2 copy computes four at a time with the same operations.
+double leaf_thresholds(const std::atomic<double>* bounds, const std::uint32_t* idx, std::uint32_t n,
+                       double slack, double* out, float* out_f);
+double leaf_thresholds_portable(const std::atomic<double>* bounds, const std::uint32_t* idx,
+                                std::uint32_t n, double slack, double* out, float* out_f);
 
 // The rows of a leaf that can keep anything against another leaf of box `box` and diagonal
 // extents `diagonals`: bit p (p < n <= 32) is set when box_squared_distance(slot first + p's box,
