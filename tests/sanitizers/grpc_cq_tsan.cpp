@@ -29,10 +29,6 @@ Fn real(const char* name) {
     return tsan_preload::real<Fn>(name, "libgrpc.so.29");
 }
 
-void releasing(void* tag) {
-    tsan_preload::release(tag);
-}
-
 grpc_event acquired(grpc_event ev) {
     if (ev.type == GRPC_OP_COMPLETE) {
         tsan_preload::acquire(ev.tag);
@@ -48,7 +44,7 @@ grpc_call_error grpc_call_start_batch(grpc_call* call, const grpc_op* ops, size_
                                       void* reserved) {
     using Fn = grpc_call_error (*)(grpc_call*, const grpc_op*, size_t, void*, void*);
     static const auto fn = real<Fn>("grpc_call_start_batch");
-    releasing(tag);
+    tsan_preload::release(tag);
     return fn(call, ops, nops, tag, reserved);
 }
 
@@ -61,7 +57,7 @@ grpc_call_error grpc_server_request_call(grpc_server* server, grpc_call** call,
         grpc_call_error (*)(grpc_server*, grpc_call**, grpc_call_details*, grpc_metadata_array*,
                             grpc_completion_queue*, grpc_completion_queue*, void*);
     static const auto fn = real<Fn>("grpc_server_request_call");
-    releasing(tag);
+    tsan_preload::release(tag);
     return fn(server, call, details, request_metadata, cq_bound_to_call, cq_for_notification, tag);
 }
 
@@ -76,7 +72,7 @@ grpc_call_error grpc_server_request_registered_call(grpc_server* server, void* r
                                    grpc_metadata_array*, grpc_byte_buffer**, grpc_completion_queue*,
                                    grpc_completion_queue*, void*);
     static const auto fn = real<Fn>("grpc_server_request_registered_call");
-    releasing(tag);
+    tsan_preload::release(tag);
     return fn(server, registered_method, call, deadline, request_metadata, optional_payload,
               cq_bound_to_call, cq_for_notification, tag);
 }

@@ -312,13 +312,9 @@ __attribute__((target("avx2"))) double leaf_thresholds_avx2(const std::atomic<do
     }
     alignas(32) double lanes[4];
     _mm256_store_pd(lanes, largest);
-    double m = std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3]));
-    for (; q < n; ++q) {
-        out[q] = traversal_threshold_sq(bounds[idx[q]].load(std::memory_order_relaxed), slack);
-        out_f[q] = float_threshold(out[q]);
-        m = std::max(m, out[q]);
-    }
-    return m;
+    // The last n mod 4 by the portable copy (its largest is 0 when there are none).
+    return std::max(std::max(std::max(lanes[0], lanes[1]), std::max(lanes[2], lanes[3])),
+                    leaf_thresholds_portable(bounds, idx + q, n - q, slack, out + q, out_f + q));
 }
 
 // float_below / float_above of in[begin..end) into out, four at a time (the same operations:
