@@ -104,15 +104,12 @@ StatusOr<std::string> ModelView::object_name(const Snapshot& at, std::uint32_t o
 
 namespace {
 
-// An overlay piece and what it owns: the count of its hierarchy's bytes and its charge to the
-// cache's budget, which so last exactly as long as the piece (whoever holds it).
+// An overlay piece and its charge to the cache's budget, which so lasts exactly as long as the
+// piece (whoever holds it); the piece itself holds the count of its hierarchy's bytes.
 struct OverlayHolder {
     OverlayHolder(std::shared_ptr<std::atomic<std::int64_t>> bytes, GeometryCache::Charge c,
                   std::uint32_t object, PieceGeometry g)
-        : tree_bytes(std::move(bytes)),
-          charge(std::move(c)),
-          piece(UINT32_MAX, object, std::move(g), tree_bytes.get()) {}
-    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;
+        : charge(std::move(c)), piece(UINT32_MAX, object, std::move(g), std::move(bytes)) {}
     GeometryCache::Charge charge;
     ResidentPiece piece;
 };

@@ -10,11 +10,12 @@
 namespace proxima::massive {
 
 ResidentPiece::ResidentPiece(std::uint32_t piece_index, std::uint32_t object_index, PieceGeometry g,
-                             std::atomic<std::int64_t>* bytes)
+                             std::shared_ptr<std::atomic<std::int64_t>> bytes)
     : piece(piece_index),
       object(object_index),
       geometry(std::move(g)),
-      bvh(geometry.vertices, geometry.triangles, bytes, geometry.source_triangles) {}
+      tree_bytes(std::move(bytes)),
+      bvh(geometry.vertices, geometry.triangles, tree_bytes.get(), geometry.source_triangles) {}
 
 std::uint64_t ResidentPiece::geometry_bytes() const {
     return geometry.vertices.size() * sizeof(Vec3) +
@@ -122,8 +123,8 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
     const auto& info = store->pieces()[piece];
     if (geometry.ok()) {
         tree_bytes = std::make_shared<std::atomic<std::int64_t>>(0);
-        resident = std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry),
-                                                   tree_bytes.get());
+        resident =
+            std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry), tree_bytes);
     }
     std::unique_lock lock(m_mutex);
     entry->loading = false;

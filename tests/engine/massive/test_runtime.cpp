@@ -455,6 +455,66 @@ TEST(GeometryCache, StaysUnderBudgetKeepsPinsAndNeverCachesCorruption) {
     fs::remove_all(dir);
 }
 
+// A get() that waited on another thread's load can return a piece whose cache entry was evicted
+// meanwhile (the loader's caller let go of it and a third load evicted it before the waiter woke:
+// nothing pinned it). The handle must stay whole: its hierarchy grows and counts its nodes after
+// the entry is gone. The CI's AddressSanitizer run of `proxima verify --shard` (three processes,
+// a cache of 512K) found the node counter freed with the entry. Here the cache holds one piece,
+// the loader lets go and loads another at once, and a thread loads other pieces all along: under
+// ASan a counter freed with its entry is a heap-use-after-free (4 runs of 4 before the mend, 1 of
+// 4 with the loader not loading again); elsewhere the test checks the trees are whole.
+TEST(GeometryCache, AHandleFromAWaitedLoadOutlivesItsEvictedEntry) {
+    const auto dir = temp_dir("waited-load");
+    ASSERT_NO_FATAL_FAILURE(write_sphere_row(dir));
+    std::shared_ptr<const Store> store = *Store::open(dir.string());
+    GeometryCache cache(store->pieces()[0].weight());
+    std::atomic<bool> stop{false};
+    std::thread evictor([&] {
+        for (std::uint32_t k = 0; !stop.load(); k = (k + 1) % 20) {
+            (void)cache.get(store, 20 + k);  // each load evicts every unpinned piece
+        }
+    });
+    std::uint64_t full_trees = 0;
+    for (int round = 0; round < 1000; ++round) {
+        const std::uint32_t piece = static_cast<std::uint32_t>(round % 20);
+        std::vector<std::thread> readers;
+        std::atomic<std::uint64_t> built{0};
+        // Reader 0 loads the piece, lets go of it at once and loads another (which evicts every
+        // unpinned piece); readers 1-3 start once its load has begun, so most of them wait on it.
+        const std::uint64_t misses = cache.stats().misses;
+        readers.emplace_back([&] {
+            ASSERT_TRUE(cache.get(store, piece).ok());
+            ASSERT_TRUE(cache.get(store, 20 + piece).ok());
+        });
+        while (cache.stats().misses == misses) {
+            std::this_thread::yield();
+        }
+        for (int r = 1; r < 4; ++r) {
+            readers.emplace_back([&] {
+                auto h = cache.get(store, piece);
+                ASSERT_TRUE(h.ok()) << h.status().to_string();
+                const PieceHandle mine = std::move(*h);
+                // Every node built; a tree of leaves of <= LEAF_SIZE triangles has at least
+                // triangles / LEAF_SIZE leaves.
+                (void)mine->bvh.expand_above(1);
+                built.fetch_add(mine->bvh.nodes_built());
+            });
+        }
+        for (auto& t : readers) {
+            t.join();
+        }
+        const std::uint64_t triangles = store->pieces()[piece].triangle_count;
+        EXPECT_GE(built.load(), 3 * (triangles / LazyBvh::LEAF_SIZE)) << "round " << round;
+        full_trees += 3;
+    }
+    stop = true;
+    evictor.join();
+    EXPECT_EQ(full_trees, 3000u);
+    EXPECT_GT(cache.stats().evictions, 1000u);
+    EXPECT_GT(cache.stats().waits, 0u) << "no get() waited on a load: the path was not exercised";
+    fs::remove_all(dir);
+}
+
 // The acceptance check of static verification: a generated plant of >= 1M triangles, pieces
 // split small, a cache a fraction of the model: verify_static equals the all-in-memory brute
 // force exactly, for collisions (tolerance 0) and a tolerance.

@@ -22,12 +22,16 @@
 namespace proxima::massive {
 
 // A piece in memory: its geometry and its lazy hierarchy. Immutable geometry; the hierarchy grows.
+// The piece shares the counter its hierarchy adds its bytes to (`tree_bytes`, may be null) with
+// whoever reads it: a handle can outlive the cache entry that counted it (a get() that waited on
+// a load returns the piece even when the entry was evicted meanwhile), and its tree still grows.
 struct ResidentPiece {
     ResidentPiece(std::uint32_t piece_index, std::uint32_t object_index, PieceGeometry g,
-                  std::atomic<std::int64_t>* bytes);
+                  std::shared_ptr<std::atomic<std::int64_t>> bytes);
     std::uint32_t piece = 0;
     std::uint32_t object = 0;
     PieceGeometry geometry;
+    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;  // before bvh: outlives it
     LazyBvh bvh;
     std::uint64_t geometry_bytes() const;
 };
