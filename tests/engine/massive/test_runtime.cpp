@@ -474,7 +474,6 @@ TEST(GeometryCache, AHandleFromAWaitedLoadOutlivesItsEvictedEntry) {
             (void)cache.get(store, 20 + k);  // each load evicts every unpinned piece
         }
     });
-    std::uint64_t full_trees = 0;
     for (int round = 0; round < 1000; ++round) {
         const std::uint32_t piece = static_cast<std::uint32_t>(round % 20);
         std::vector<std::thread> readers;
@@ -505,11 +504,9 @@ TEST(GeometryCache, AHandleFromAWaitedLoadOutlivesItsEvictedEntry) {
         }
         const std::uint64_t triangles = store->pieces()[piece].triangle_count;
         EXPECT_GE(built.load(), 3 * (triangles / LazyBvh::LEAF_SIZE)) << "round " << round;
-        full_trees += 3;
     }
     stop = true;
     evictor.join();
-    EXPECT_EQ(full_trees, 3000u);
     EXPECT_GT(cache.stats().evictions, 1000u);
     EXPECT_GT(cache.stats().waits, 0u) << "no get() waited on a load: the path was not exercised";
     fs::remove_all(dir);
