@@ -28,8 +28,7 @@ struct GeometryCache::Entry {
     bool loading = false;
     Status error;  // of the last failed load (entry then removed)
     std::list<Key>::iterator lru;
-    std::int64_t charged = 0;  // geometry bytes charged at load
-    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;
+    std::int64_t charged = 0;            // geometry bytes charged at load
     std::shared_ptr<const Store> store;  // keeps the store open while its pieces are resident
 };
 
@@ -48,9 +47,9 @@ GeometryCache::~GeometryCache() {
 }
 
 namespace {
-std::int64_t entry_bytes(const std::shared_ptr<std::atomic<std::int64_t>>& tree,
-                         std::int64_t charged) {
-    return charged + (tree ? tree->load(std::memory_order_relaxed) : 0);
+// The geometry charged at load plus the piece's hierarchy so far (none while loading).
+std::int64_t entry_bytes(const PieceHandle& piece, std::int64_t charged) {
+    return charged + (piece ? piece->tree_bytes->load(std::memory_order_relaxed) : 0);
 }
 }  // namespace
 
@@ -118,13 +117,11 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
         return get(store, piece);
     }
     auto geometry = store->read_piece(piece);
-    std::shared_ptr<std::atomic<std::int64_t>> tree_bytes;
     PieceHandle resident;
     const auto& info = store->pieces()[piece];
     if (geometry.ok()) {
-        tree_bytes = std::make_shared<std::atomic<std::int64_t>>(0);
-        resident =
-            std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry), tree_bytes);
+        resident = std::make_shared<ResidentPiece>(piece, info.object, std::move(*geometry),
+                                                   std::make_shared<std::atomic<std::int64_t>>(0));
     }
     std::unique_lock lock(m_mutex);
     entry->loading = false;
@@ -135,7 +132,6 @@ StatusOr<PieceHandle> GeometryCache::load(const std::shared_ptr<const Store>& st
         m_loaded.notify_all();
         return geometry.status();
     }
-    entry->tree_bytes = std::move(tree_bytes);
     entry->piece = std::move(resident);
     entry->charged = static_cast<std::int64_t>(entry->piece->geometry_bytes());
     ++m_stats.loads;
@@ -212,7 +208,7 @@ std::int64_t GeometryCache::resident_locked() const {
     // Summed on demand: hierarchies grow without taking the cache lock.
     std::int64_t total = 0;
     for (const auto& [k, e] : m_entries) {
-        total += entry_bytes(e->tree_bytes, e->charged);
+        total += entry_bytes(e->piece, e->charged);
     }
     return total;
 }
@@ -231,7 +227,7 @@ void GeometryCache::evict_locked() {
         if (entry->loading || entry->piece.use_count() > 1) {
             continue;
         }
-        total -= entry_bytes(entry->tree_bytes, entry->charged);
+        total -= entry_bytes(entry->piece, entry->charged);
         ++m_stats.evictions;
         m_entries.erase(e);
         it = m_lru.erase(it);
